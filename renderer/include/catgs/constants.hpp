@@ -1,0 +1,56 @@
+// Named constants of the rendering semantics, each with the reason it has its value.
+// Both backends read these; changing one changes the reference and the GPU alike.
+#pragma once
+
+#include "catgs/hd.hpp"
+
+namespace catgs {
+
+/// Tiles are 16x16 pixels: one CUDA block of 256 threads rasterizes one tile, the layout
+/// of graphdeco 3DGS and gsplat; the sort key stores tile ids, so it also sets key bits.
+inline constexpr int kTileSize = 16;
+
+/// Default near plane (view-space z). Gaussians at z <= near are culled; 0.2 is graphdeco's
+/// value, and it keeps 1/z of the projection Jacobian bounded.
+inline constexpr double kDefaultNearPlane = 0.2;
+
+/// The Jacobian of the perspective projection is evaluated at x/z, y/z clamped to 1.3x the
+/// half field of view (principal-point aware, as gsplat): Gaussians far outside the image
+/// would otherwise get huge, numerically useless 2D covariances.
+inline constexpr double kJacobianClampFactor = 1.3;
+
+/// Added to the diagonal of every 2D covariance (in pixels^2): a low-pass filter so that a
+/// Gaussian never becomes thinner than about one pixel (graphdeco's 0.3, gsplat's eps2d).
+inline constexpr double kCovarianceBlur = 0.3;
+
+/// Per-Gaussian alpha is capped at 0.99 so that one Gaussian never makes a pixel fully
+/// opaque on its own (graphdeco, gsplat MAX_ALPHA).
+inline constexpr double kMaxAlpha = 0.99;
+
+/// A Gaussian whose alpha at a pixel is below 1/255 is skipped: it cannot change an 8-bit
+/// value. The same bound defines opacity-aware culling and the load-time opacity filter.
+inline constexpr double kMinAlpha = 1.0 / 255.0;
+
+/// A pixel stops blending before the Gaussian that would bring its transmittance below 1e-4
+/// (graphdeco's exclusive stop; (1 - 0.99)^2 in gsplat's words): what lies behind can add at
+/// most 1e-4 of light, far under half an 8-bit level.
+inline constexpr double kMinTransmittance = 1e-4;
+
+/// Spherical-harmonics colour is offset by 0.5 (the DC term of a trained scene is centred
+/// on grey) and clamped at zero, as graphdeco does; the upper clamp happens on output.
+inline constexpr double kShColourOffset = 0.5;
+
+/// The highest SH degree a scene may carry (16 coefficients per channel).
+inline constexpr int kMaxShDegree = 3;
+
+/// Number of SH coefficients per colour channel for a degree.
+CATGS_HD constexpr int sh_coefficient_count(int degree) { return (degree + 1) * (degree + 1); }
+
+/// Graphdeco's 3-sigma radius uses max(0.1, mid^2 - det) under the square root so that a
+/// circular 2D Gaussian still gets a well-defined eigenvalue spread.
+inline constexpr double kBBoxEigenFloor = 0.1;
+
+/// The 3-sigma extent of the graphdeco baseline (`bbox3sigma`).
+inline constexpr double kBBoxSigmas = 3.0;
+
+}  // namespace catgs

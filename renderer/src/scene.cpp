@@ -1,0 +1,94 @@
+#include "catgs/scene.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <sstream>
+
+#include <nlohmann/json.hpp>
+
+#include "catgs/error.hpp"
+
+namespace catgs {
+
+std::size_t Scene::bytes() const {
+    return sizeof(float) * (positions.size() + scales.size() + rotations.size() + opacities.size() + sh.size());
+}
+
+void Scene::resize(std::size_t n) {
+    positions.resize(3 * n);
+    scales.resize(3 * n);
+    rotations.resize(4 * n);
+    opacities.resize(n);
+    sh.resize(sh_floats_per_gaussian() * n);
+}
+
+void Scene::update_bounds() {
+    if (count() == 0) {
+        bounds = Bounds{};
+        return;
+    }
+    Bounds b;
+    for (int a = 0; a < 3; ++a) {
+        b.min[a] = std::numeric_limits<double>::infinity();
+        b.max[a] = -std::numeric_limits<double>::infinity();
+    }
+    for (std::size_t i = 0; i < count(); ++i)
+        for (int a = 0; a < 3; ++a) {
+            double v = origin[a] + static_cast<double>(positions[3 * i + a]);
+            b.min[a] = std::min(b.min[a], v);
+            b.max[a] = std::max(b.max[a], v);
+        }
+    bounds = b;
+}
+
+void Scene::recentre() {
+    update_bounds();
+    std::array<double, 3> centre;
+    for (int a = 0; a < 3; ++a) centre[a] = 0.5 * (bounds.min[a] + bounds.max[a]);
+    for (std::size_t i = 0; i < count(); ++i)
+        for (int a = 0; a < 3; ++a)
+            positions[3 * i + a] =
+                static_cast<float>((origin[a] + static_cast<double>(positions[3 * i + a])) - centre[a]);
+    origin = centre;
+    update_bounds();
+}
+
+void Scene::check_consistent(const std::string& what) const {
+    const std::size_t n = count();
+    if (sh_degree < 0 || sh_degree > kMaxShDegree)
+        throw Error(what + ": SH degree " + std::to_string(sh_degree) + " is outside 0..3");
+    auto expect = [&](const char* name, std::size_t got, std::size_t want) {
+        if (got != want)
+            throw Error(what + ": array '" + name + "' holds " + std::to_string(got) + " floats, expected " +
+                        std::to_string(want));
+    };
+    expect("positions", positions.size(), 3 * n);
+    expect("scales", scales.size(), 3 * n);
+    expect("rotations", rotations.size(), 4 * n);
+    expect("sh", sh.size(), sh_floats_per_gaussian() * n);
+}
+
+std::string describe(const Scene& s) {
+    std::ostringstream o;
+    o.precision(10);
+    o << "gaussians " << s.count() << ", SH degree " << s.sh_degree << ", bounds [" << s.bounds.min[0] << ", "
+      << s.bounds.min[1] << ", " << s.bounds.min[2] << "] .. [" << s.bounds.max[0] << ", " << s.bounds.max[1]
+      << ", " << s.bounds.max[2] << "], origin [" << s.origin[0] << ", " << s.origin[1] << ", " << s.origin[2]
+      << "], memory " << s.bytes() << " bytes (" << std::fixed;
+    o.precision(1);
+    o << static_cast<double>(s.bytes()) / (1024.0 * 1024.0) << " MiB)";
+    return o.str();
+}
+
+std::string describe_json(const Scene& s) {
+    nlohmann::json j;
+    j["gaussians"] = s.count();
+    j["sh_degree"] = s.sh_degree;
+    j["bounds"] = {{"min", s.bounds.min}, {"max", s.bounds.max}};
+    j["origin"] = s.origin;
+    j["bytes"] = s.bytes();
+    return j.dump();
+}
+
+}  // namespace catgs
