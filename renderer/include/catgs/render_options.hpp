@@ -1,0 +1,35 @@
+// Options and per-frame statistics shared by every backend.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <string>
+
+#include "catgs/constants.hpp"
+#include "catgs/stages/tiles.hpp"
+
+namespace catgs {
+
+struct RenderOptions {
+    Culling culling = Culling::opacity_aware;
+    std::array<float, 3> background{0.0f, 0.0f, 0.0f};
+    double near_plane = kDefaultNearPlane;
+};
+
+/// Parses "exact", "bbox3sigma", "opacity-aware"; throws catgs::Error listing them otherwise.
+Culling parse_culling(const std::string& name);
+const char* culling_name(Culling culling);
+
+/// Wall time per stage (milliseconds) and work counts of one frame.
+struct FrameStats {
+    std::uint64_t visible = 0;  ///< Gaussians that passed preprocess
+    std::uint64_t pairs = 0;    ///< tile-Gaussian pairs emitted (render length)
+    std::uint64_t arena_bytes = 0;  ///< device memory held by the renderer's arenas (GPU)
+    int bands = 1;              ///< horizontal bands the frame was rendered in (GPU overflow path)
+    /// keys_ms covers the emit pass, scan_ms the prefix sum of tile counts (the CPU backend
+    /// folds its scan into keys_ms), copy_ms the copy of the image to the host (GPU).
+    double preprocess_ms = 0, scan_ms = 0, keys_ms = 0, sort_ms = 0, ranges_ms = 0, rasterize_ms = 0, copy_ms = 0,
+           total_ms = 0;
+};
+
+}  // namespace catgs

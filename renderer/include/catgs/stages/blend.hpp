@@ -1,0 +1,57 @@
+// Stage 5, the per-pixel blend of graphdeco 3DGS (paper eq. 3): front to back,
+// C += c * alpha * T, T *= 1 - alpha, with alpha = min(0.99, sigma * exp(-q/2)).
+#pragma once
+
+#include <cstdint>
+
+#include "catgs/constants.hpp"
+#include "catgs/hd.hpp"
+#include "catgs/math.hpp"
+
+namespace catgs {
+
+template <typename T>
+struct PixelAccumulator {
+    Vec3<T> colour{T(0), T(0), T(0)};
+    T transmittance = T(1);
+    bool done = false;
+};
+
+/// Blends one Gaussian into a pixel sampled at (px, py). Sets acc.done (and blends nothing)
+/// when this Gaussian would bring the transmittance below `min_transmittance`: graphdeco's
+/// exclusive stop. Returns acc.done.
+template <typename T>
+CATGS_HD bool blend_gaussian(PixelAccumulator<T>& acc, Vec2<T> mean, Vec3<T> conic, T opacity, Vec3<T> colour, T px,
+                             T py, T min_transmittance = static_cast<T>(kMinTransmittance)) {
+    const T dx = mean.x - px, dy = mean.y - py;
+    const T power = T(-0.5) * (conic.x * dx * dx + conic.z * dy * dy) - conic.y * dx * dy;
+    if (power > T(0)) return false;
+    T alpha = opacity * exp_of(power);
+    alpha = alpha < static_cast<T>(kMaxAlpha) ? alpha : static_cast<T>(kMaxAlpha);
+    if (alpha < static_cast<T>(kMinAlpha)) return false;
+    const T next = acc.transmittance * (T(1) - alpha);
+    if (next < min_transmittance) {
+        acc.done = true;
+        return true;
+    }
+    const T weight = alpha * acc.transmittance;
+    acc.colour = {acc.colour.x + colour.x * weight, acc.colour.y + colour.y * weight, acc.colour.z + colour.z * weight};
+    acc.transmittance = next;
+    return false;
+}
+
+/// Final pixel value C + T * background, before clamping.
+template <typename T>
+CATGS_INLINE Vec3<T> finish_pixel(const PixelAccumulator<T>& acc, Vec3<T> background) {
+    return {acc.colour.x + acc.transmittance * background.x, acc.colour.y + acc.transmittance * background.y,
+            acc.colour.z + acc.transmittance * background.z};
+}
+
+/// Clamps to [0, 1] and rounds to the nearest 8-bit level.
+template <typename T>
+CATGS_INLINE std::uint8_t quantize_8bit(T v) {
+    v = v > T(0) ? (v < T(1) ? v : T(1)) : T(0);  // NaN -> 0
+    return static_cast<std::uint8_t>(v * T(255) + T(0.5));
+}
+
+}  // namespace catgs

@@ -1,0 +1,93 @@
+// Stage 1, preprocess: one Gaussian against one view. Culls, projects the mean, forms the 2D
+// covariance by the EWA splatting approximation (Zwicker et al. 2002, eqs. 29/31, as in
+// graphdeco 3DGS), inverts it to the conic, and evaluates the SH colour.
+#pragma once
+
+#include <cstdint>
+
+#include "catgs/constants.hpp"
+#include "catgs/hd.hpp"
+#include "catgs/math.hpp"
+#include "catgs/stages/sh.hpp"
+#include "catgs/stages/view.hpp"
+
+namespace catgs {
+
+/// What the later stages need of one visible Gaussian.
+template <typename T>
+struct Projected {
+    Vec2<T> mean;    ///< image position in pixels; pixel i is sampled at i + 0.5
+    Vec3<T> conic;   ///< (a, b, c): upper triangle of the inverse 2D covariance
+    Vec3<T> cov;     ///< (xx, xy, yy): the 2D covariance, blur included (for extents)
+    Vec3<T> colour;  ///< RGB from SH, >= 0
+    T opacity;       ///< activated opacity sigma
+    T depth;         ///< view-space z, > near plane
+};
+
+/// The per-Gaussian inputs, as pointers into the Scene's arrays at index i.
+struct GaussianRef {
+    const float* position;  ///< 3
+    const float* scale;     ///< 3
+    const float* rotation;  ///< 4, (w, x, y, z), unit
+    float opacity;
+    const float* sh;        ///< sh_coefficient_count(degree) RGB triples
+    int sh_degree;
+};
+
+/// 3D covariance Sigma = R S S^T R^T of a Gaussian (paper eq. 6), as a symmetric matrix.
+template <typename T>
+CATGS_HD Mat3<T> covariance_3d(const float* scale, const float* rotation) {
+    const Mat3<T> r = quat_to_matrix<T>(rotation[0], rotation[1], rotation[2], rotation[3]);
+    Mat3<T> m;  // M = R S
+    for (int i = 0; i < 3; ++i)
+        for (int j = 0; j < 3; ++j) m.m[i][j] = r.m[i][j] * static_cast<T>(scale[j]);
+    return m * transpose(m);
+}
+
+/// Projects one Gaussian. Returns false (culled) when it is at or behind the near plane, or
+/// when its 2D covariance is degenerate or not finite; `out` is then unspecified.
+template <typename T>
+CATGS_HD bool project_gaussian(const GaussianRef& g, const View<T>& view, Projected<T>& out) {
+    const Vec3<T> p{static_cast<T>(g.position[0]), static_cast<T>(g.position[1]), static_cast<T>(g.position[2])};
+    const Vec3<T> pc = view.rotation * p + view.translation;
+    if (!(pc.z > view.near_plane)) return false;  // also rejects NaN
+
+    // Jacobian of the projection at the clamped direction: far off-screen Gaussians would
+    // otherwise get 2D covariances dominated by the 1/z^2 terms.
+    const T inv_z = T(1) / pc.z;
+    T tx = pc.x * inv_z, ty = pc.y * inv_z;
+    tx = tx < -view.clamp_left ? -view.clamp_left : (tx > view.clamp_right ? view.clamp_right : tx);
+    ty = ty < -view.clamp_top ? -view.clamp_top : (ty > view.clamp_bottom ? view.clamp_bottom : ty);
+    Mat3<T> j{};  // third row zero: only the upper-left 2x2 of the result is used
+    j.m[0][0] = view.fx * inv_z;
+    j.m[0][2] = -view.fx * tx * inv_z;
+    j.m[1][1] = view.fy * inv_z;
+    j.m[1][2] = -view.fy * ty * inv_z;
+
+    // Sigma' = J W Sigma W^T J^T (EWA eq. 31), plus the low-pass blur on the diagonal.
+    const Mat3<T> jw = j * view.rotation;
+    const Mat3<T> cov3 = covariance_3d<T>(g.scale, g.rotation);
+    const Mat3<T> s2 = jw * cov3 * transpose(jw);
+    const T blur = static_cast<T>(kCovarianceBlur);
+    const T cxx = s2.m[0][0] + blur, cxy = s2.m[0][1], cyy = s2.m[1][1] + blur;
+    const T det = cxx * cyy - cxy * cxy;
+    if (!(det > T(0)) || !is_finite(det)) return false;
+    const T inv_det = T(1) / det;
+
+    out.mean = {view.fx * pc.x * inv_z + view.cx, view.fy * pc.y * inv_z + view.cy};
+    out.conic = {cyy * inv_det, -cxy * inv_det, cxx * inv_det};
+    out.cov = {cxx, cxy, cyy};
+    out.depth = pc.z;
+    out.opacity = static_cast<T>(g.opacity);
+    if (!is_finite(out.mean.x) || !is_finite(out.mean.y) || !is_finite(out.conic.x) || !is_finite(out.conic.y) ||
+        !is_finite(out.conic.z))
+        return false;
+
+    Vec3<T> dir = p - view.centre;
+    const T len = sqrt_of(dot(dir, dir));
+    dir = len > T(0) ? (T(1) / len) * dir : Vec3<T>{T(0), T(0), T(1)};
+    out.colour = sh_colour<T>(g.sh, g.sh_degree, dir);
+    return true;
+}
+
+}  // namespace catgs

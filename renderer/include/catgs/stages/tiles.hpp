@@ -1,0 +1,172 @@
+// Stage 2, which tiles a projected Gaussian touches. The count pass and the emit pass both
+// call for_each_touched_tile, so they can never disagree (graphdeco's NaN crash,
+// gaussian-splatting#781, came from count and emit using different predicates).
+#pragma once
+
+#include <cstdint>
+#include <cstring>
+
+#include "catgs/constants.hpp"
+#include "catgs/hd.hpp"
+#include "catgs/math.hpp"
+#include "catgs/stages/project.hpp"
+#include "catgs/stages/view.hpp"
+
+namespace catgs {
+
+enum class Culling : int {
+    /// Every visible Gaussian is evaluated at every pixel: one list serves all tiles.
+    /// The ground truth for tests; cost grows with Gaussians x pixels.
+    exact = 0,
+    /// graphdeco's square of tiles around the 3-sigma circle of the major axis.
+    bbox3sigma = 1,
+    /// The ellipse where sigma * exp(-q/2) reaches 1/255 (FlashGS, gsplat), with an exact
+    /// ellipse-tile test: it drops only pairs whose every pixel has alpha < 1/255.
+    opacity_aware = 2,
+};
+
+/// Relative and absolute slack on the opacity-aware level set, so that rounding in the
+/// rasterizer's alpha can never make a pixel visible that the tile test rejected.
+inline constexpr double kOpacityLevelRelativeSlack = 1e-3;
+inline constexpr double kOpacityLevelAbsoluteSlack = 1e-3;
+
+/// [x0, x1) x [y0, y1) in tiles.
+struct TileRect {
+    int x0, y0, x1, y1;
+    CATGS_HD bool empty() const { return x0 >= x1 || y0 >= y1; }
+};
+
+/// floor(v) clamped to [lo, hi]; NaN maps to lo. Avoids the undefined float-to-int conversion
+/// of values outside int range (huge Gaussians, far off-screen).
+template <typename T>
+CATGS_HD int clamped_floor(T v, int lo, int hi) {
+    if (!(v > static_cast<T>(lo))) return lo;
+    if (!(v < static_cast<T>(hi))) return hi;
+    return static_cast<int>(floor_of(v));
+}
+
+/// The squared Mahalanobis level q (conic form) inside which alpha >= 1/255:
+/// sigma * exp(-q/2) >= 1/255  <=>  q <= 2 ln(255 sigma). Negative when sigma < 1/255.
+template <typename T>
+CATGS_HD T opacity_level(T opacity) {
+    const T level = T(2) * log_of(opacity / static_cast<T>(kMinAlpha));
+    return level * static_cast<T>(1.0 + kOpacityLevelRelativeSlack) + static_cast<T>(kOpacityLevelAbsoluteSlack);
+}
+
+/// Tile rectangle of a Gaussian under a culling mode (exact mode: the whole grid).
+template <typename T>
+CATGS_HD TileRect tile_rect(const Projected<T>& g, Culling mode, int tiles_x, int tiles_y) {
+    const T tile = static_cast<T>(kTileSize);
+    if (mode == Culling::exact) return {0, 0, tiles_x, tiles_y};
+    if (mode == Culling::bbox3sigma) {
+        // graphdeco: radius = ceil(3 sqrt(lambda_max)) around the mean in its pixel
+        // convention (pixel i at coordinate i), i.e. our mean minus 0.5.
+        const T mid = T(0.5) * (g.cov.x + g.cov.z);
+        const T det = g.cov.x * g.cov.z - g.cov.y * g.cov.y;
+        const T spread = mid * mid - det;
+        const T floor_spread = static_cast<T>(kBBoxEigenFloor);
+        const T lambda = mid + sqrt_of(spread > floor_spread ? spread : floor_spread);
+        const T radius = ceil_of(static_cast<T>(kBBoxSigmas) * sqrt_of(lambda));
+        const T px = g.mean.x - T(0.5), py = g.mean.y - T(0.5);
+        return {clamped_floor((px - radius) / tile, 0, tiles_x), clamped_floor((py - radius) / tile, 0, tiles_y),
+                clamped_floor((px + radius + tile - T(1)) / tile, 0, tiles_x),
+                clamped_floor((py + radius + tile - T(1)) / tile, 0, tiles_y)};
+    }
+    const T level = opacity_level(g.opacity);
+    if (!(level > T(0))) return {0, 0, 0, 0};
+    // Axis-aligned half extents of the ellipse q <= level: sqrt(level * Sigma'_ii).
+    const T hx = sqrt_of(level * g.cov.x), hy = sqrt_of(level * g.cov.z);
+    // Pixel i (sampled at i + 0.5) can be inside when mean - h <= i + 0.5 <= mean + h.
+    const T lo_x = g.mean.x - hx - T(0.5), hi_x = g.mean.x + hx - T(0.5);
+    const T lo_y = g.mean.y - hy - T(0.5), hi_y = g.mean.y + hy - T(0.5);
+    return {clamped_floor(lo_x / tile, 0, tiles_x), clamped_floor(lo_y / tile, 0, tiles_y),
+            clamped_floor(hi_x / tile + T(1), 0, tiles_x), clamped_floor(hi_y / tile + T(1), 0, tiles_y)};
+}
+
+/// q(d) = a dx^2 + 2 b dx dy + c dy^2 for the conic (a, b, c).
+template <typename T>
+CATGS_INLINE T conic_form(Vec3<T> conic, T dx, T dy) {
+    return conic.x * dx * dx + T(2) * conic.y * dx * dy + conic.z * dy * dy;
+}
+
+/// Minimum of q over the segment where one offset is fixed (`fixed`) and the other runs over
+/// [lo, hi]; `along_y` says which one runs. q is convex in the running offset, so the
+/// minimum is at its stationary point clamped into the segment.
+template <typename T>
+CATGS_INLINE T min_conic_on_edge(Vec3<T> conic, T fixed, T lo, T hi, bool along_y) {
+    const T a = along_y ? conic.z : conic.x;  // coefficient of the running offset squared
+    T s = -conic.y * fixed / a;
+    s = s < lo ? lo : (s > hi ? hi : s);
+    return along_y ? conic_form(conic, fixed, s) : conic_form(conic, s, fixed);
+}
+
+/// Exact test: does the ellipse q <= level reach a pixel centre region of tile (tx, ty)?
+/// The region is the rectangle spanned by the tile's pixel centres (clipped to the image);
+/// q is minimised over it: zero if the mean is inside, else on one of its four edges.
+template <typename T>
+CATGS_HD bool ellipse_touches_tile(const Projected<T>& g, T level, int tx, int ty, int width, int height) {
+    const int px0 = tx * kTileSize, py0 = ty * kTileSize;
+    const int px1 = (px0 + kTileSize < width ? px0 + kTileSize : width) - 1;
+    const int py1 = (py0 + kTileSize < height ? py0 + kTileSize : height) - 1;
+    const T x0 = static_cast<T>(px0) + T(0.5) - g.mean.x, x1 = static_cast<T>(px1) + T(0.5) - g.mean.x;
+    const T y0 = static_cast<T>(py0) + T(0.5) - g.mean.y, y1 = static_cast<T>(py1) + T(0.5) - g.mean.y;
+    if (x0 <= T(0) && x1 >= T(0) && y0 <= T(0) && y1 >= T(0)) return true;
+    T q = min_conic_on_edge(g.conic, x0, y0, y1, true);
+    T e = min_conic_on_edge(g.conic, x1, y0, y1, true);
+    q = e < q ? e : q;
+    e = min_conic_on_edge(g.conic, y0, x0, x1, false);
+    q = e < q ? e : q;
+    e = min_conic_on_edge(g.conic, y1, x0, x1, false);
+    q = e < q ? e : q;
+    return q <= level;
+}
+
+/// Tile rows [begin, end): the GPU backend renders a frame whose tile-Gaussian pairs do not
+/// fit its arena in horizontal bands; a band restricts the tiles a Gaussian touches.
+struct TileRows {
+    int begin = 0;
+    int end = 1 << 30;
+};
+
+/// Calls emit(tile_id) for every tile the Gaussian touches under `mode` (within `rows`) and
+/// returns how many. In exact mode each Gaussian emits one entry for tile 0: the tile-ranges
+/// stage then gives that single list to every tile. Used by the count and the emit pass alike.
+template <typename T, typename Emit>
+CATGS_HD std::uint32_t for_each_touched_tile(const Projected<T>& g, Culling mode, const View<T>& view, Emit&& emit,
+                                             TileRows rows = {}) {
+    if (mode == Culling::exact) {
+        emit(std::uint32_t{0});
+        return 1;
+    }
+    TileRect r = tile_rect(g, mode, view.tiles_x, view.tiles_y);
+    r.y0 = r.y0 > rows.begin ? r.y0 : rows.begin;
+    r.y1 = r.y1 < rows.end ? r.y1 : rows.end;
+    if (r.empty()) return 0;
+    std::uint32_t n = 0;
+    const T level = mode == Culling::opacity_aware ? opacity_level(g.opacity) : T(0);
+    for (int ty = r.y0; ty < r.y1; ++ty)
+        for (int tx = r.x0; tx < r.x1; ++tx) {
+            if (mode == Culling::opacity_aware && !ellipse_touches_tile(g, level, tx, ty, view.width, view.height))
+                continue;
+            emit(static_cast<std::uint32_t>(ty * view.tiles_x + tx));
+            ++n;
+        }
+    return n;
+}
+
+/// Sort key: tile id in the high 32 bits, the float bits of the view depth in the low 32.
+/// Depth > near plane > 0, and positive IEEE floats order like their bit patterns.
+CATGS_INLINE std::uint64_t make_sort_key(std::uint32_t tile, float depth) {
+#if defined(__CUDA_ARCH__)
+    const std::uint32_t bits = __float_as_uint(depth);
+#else
+    std::uint32_t bits;
+    static_assert(sizeof(bits) == sizeof(depth));
+    std::memcpy(&bits, &depth, sizeof(bits));
+#endif
+    return (static_cast<std::uint64_t>(tile) << 32) | bits;
+}
+
+CATGS_INLINE std::uint32_t key_tile(std::uint64_t key) { return static_cast<std::uint32_t>(key >> 32); }
+
+}  // namespace catgs

@@ -1,0 +1,67 @@
+// The per-frame camera as the kernels see it: scene-relative and in the render precision T.
+//
+// The world-to-camera transform is x_cam = R x_world + t. With x_world = origin + p, where p
+// is the float position stored relative to the scene origin, x_cam = R p + (R origin + t).
+// R origin + t is formed in double on the host: for a UTM-sized scene both terms are ~10^6 m
+// and cancel to the camera's distance from the scene, so nothing large ever enters float.
+#pragma once
+
+#include <array>
+
+#include "catgs/camera.hpp"
+#include "catgs/constants.hpp"
+#include "catgs/math.hpp"
+
+namespace catgs {
+
+template <typename T>
+struct View {
+    Mat3<T> rotation;     ///< world (= scene-relative) to camera
+    Vec3<T> translation;  ///< R * origin + t: scene-relative to camera
+    Vec3<T> centre;       ///< camera centre relative to the scene origin (for SH directions)
+    T fx, fy, cx, cy;
+    int width, height;
+    int tiles_x, tiles_y;
+    T near_plane;
+    /// Jacobian clamp: x/z in [-clamp_left, clamp_right], y/z in [-clamp_top, clamp_bottom].
+    /// gsplat's principal-point-aware form of graphdeco's 1.3 * tan(fov/2): the image edge
+    /// plus 0.3 of the half-width tangent on each side.
+    T clamp_left, clamp_right, clamp_top, clamp_bottom;
+};
+
+inline int tiles_for(int pixels) { return (pixels + kTileSize - 1) / kTileSize; }
+
+/// Builds the View of `camera` for a scene whose positions are relative to `origin`.
+template <typename T>
+View<T> make_view(const Camera& camera, const std::array<double, 3>& origin, double near_plane = kDefaultNearPlane) {
+    const Intrinsics& k = camera.intrinsics;
+    const auto& r = camera.pose.rotation;
+    const auto& t = camera.pose.translation;
+    View<T> v;
+    for (int i = 0; i < 3; ++i)
+        for (int j = 0; j < 3; ++j) v.rotation.m[i][j] = static_cast<T>(r[3 * i + j]);
+    double tr[3];
+    for (int i = 0; i < 3; ++i)
+        tr[i] = r[3 * i] * origin[0] + r[3 * i + 1] * origin[1] + r[3 * i + 2] * origin[2] + t[i];
+    v.translation = {static_cast<T>(tr[0]), static_cast<T>(tr[1]), static_cast<T>(tr[2])};
+    auto c = camera_centre(camera.pose);
+    v.centre = {static_cast<T>(c[0] - origin[0]), static_cast<T>(c[1] - origin[1]), static_cast<T>(c[2] - origin[2])};
+    v.fx = static_cast<T>(k.fx);
+    v.fy = static_cast<T>(k.fy);
+    v.cx = static_cast<T>(k.cx);
+    v.cy = static_cast<T>(k.cy);
+    v.width = k.width;
+    v.height = k.height;
+    v.tiles_x = tiles_for(k.width);
+    v.tiles_y = tiles_for(k.height);
+    v.near_plane = static_cast<T>(near_plane);
+    const double slack = kJacobianClampFactor - 1.0;
+    const double half_tan_x = 0.5 * k.width / k.fx, half_tan_y = 0.5 * k.height / k.fy;
+    v.clamp_left = static_cast<T>(k.cx / k.fx + slack * half_tan_x);
+    v.clamp_right = static_cast<T>((k.width - k.cx) / k.fx + slack * half_tan_x);
+    v.clamp_top = static_cast<T>(k.cy / k.fy + slack * half_tan_y);
+    v.clamp_bottom = static_cast<T>((k.height - k.cy) / k.fy + slack * half_tan_y);
+    return v;
+}
+
+}  // namespace catgs
