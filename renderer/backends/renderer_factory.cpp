@@ -1,0 +1,89 @@
+#include "catgs/cpu_renderer.hpp"
+#include "catgs/error.hpp"
+#include "catgs/renderer.hpp"
+
+#if CATGS_HAVE_CUDA
+#include "cuda_renderer.hpp"
+#endif
+
+namespace catgs {
+namespace {
+
+template <typename T>
+class CpuBackend final : public Renderer {
+public:
+    explicit CpuBackend(int threads) : renderer_(threads) {}
+    void set_scene(std::shared_ptr<const Scene> scene) override { scene_ = std::move(scene); }
+    FrameStats render(const Camera& camera, const RenderOptions& options, ImageF& out) override {
+        if (!scene_) throw Error("cpu renderer: no scene set");
+        return renderer_.render(*scene_, camera, options, out);
+    }
+    std::string name() const override { return sizeof(T) == 4 ? "cpu/float" : "cpu/double"; }
+
+private:
+    CpuRenderer<T> renderer_;
+    std::shared_ptr<const Scene> scene_;
+};
+
+#if CATGS_HAVE_CUDA
+template <typename T>
+class CudaBackend final : public Renderer {
+public:
+    void set_scene(std::shared_ptr<const Scene> scene) override {
+        renderer_.set_scene(std::make_shared<cuda::DeviceScene>(*scene, renderer_.stream()));
+    }
+    FrameStats render(const Camera& camera, const RenderOptions& options, ImageF& out) override {
+        return renderer_.render(camera, options, nullptr, &out);
+    }
+    FrameStats render_rgb8(const Camera& camera, const RenderOptions& options, ImageRGB8& out) override {
+        return renderer_.render(camera, options, &out, nullptr);
+    }
+    std::string name() const override { return sizeof(T) == 4 ? "cuda/float" : "cuda/double"; }
+
+private:
+    cuda::CudaRenderer<T> renderer_;
+};
+#endif
+
+}  // namespace
+
+FrameStats Renderer::render_rgb8(const Camera& camera, const RenderOptions& options, ImageRGB8& out) {
+    ImageF image;
+    FrameStats stats = render(camera, options, image);
+    out = to_rgb8(image);
+    return stats;
+}
+
+Precision parse_precision(const std::string& name) {
+    if (name == "float") return Precision::single;
+    if (name == "double") return Precision::double_;
+    throw Error("unknown precision '" + name + "' (expected float or double)");
+}
+
+std::string available_backends() {
+#if CATGS_HAVE_CUDA
+    return "cpu, cuda";
+#else
+    return "cpu";
+#endif
+}
+
+std::unique_ptr<Renderer> make_renderer(const std::string& backend, Precision precision, int threads) {
+    if (backend == "cpu") {
+        if (precision == Precision::double_) return std::make_unique<CpuBackend<double>>(threads);
+        return std::make_unique<CpuBackend<float>>(threads);
+    }
+    if (backend == "cuda") {
+#if CATGS_HAVE_CUDA
+        std::string reason;
+        if (!cuda::device_available(&reason)) throw Error("backend 'cuda': no usable CUDA device (" + reason + ")");
+        if (precision == Precision::double_) return std::make_unique<CudaBackend<double>>();
+        return std::make_unique<CudaBackend<float>>();
+#else
+        throw Error("backend 'cuda' is not built into this binary (available: " + available_backends() + ")");
+#endif
+    }
+    throw Error("unknown backend '" + backend + "' (available: " + available_backends() + ")");
+}
+
+}  // namespace catgs

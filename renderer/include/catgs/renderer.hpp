@@ -1,0 +1,39 @@
+// The backend-neutral renderer interface that tools and the server use. A renderer holds one
+// scene (uploaded once on the GPU) and renders frames of it; each instance owns its stage
+// buffers, so one instance serves one stream at a time.
+#pragma once
+
+#include <memory>
+#include <string>
+
+#include "catgs/camera.hpp"
+#include "catgs/image.hpp"
+#include "catgs/render_options.hpp"
+#include "catgs/scene.hpp"
+
+namespace catgs {
+
+enum class Precision { single, double_ };
+
+/// "float" or "double"; throws catgs::Error otherwise.
+Precision parse_precision(const std::string& name);
+
+class Renderer {
+public:
+    virtual ~Renderer() = default;
+    /// Makes `scene` the one rendered by the following frames (the GPU backend uploads it).
+    virtual void set_scene(std::shared_ptr<const Scene> scene) = 0;
+    virtual FrameStats render(const Camera& camera, const RenderOptions& options, ImageF& out) = 0;
+    /// 8-bit output; the GPU backend quantises on the device and copies a quarter of the bytes.
+    virtual FrameStats render_rgb8(const Camera& camera, const RenderOptions& options, ImageRGB8& out);
+    virtual std::string name() const = 0;
+};
+
+/// Backends compiled into this binary, e.g. "cpu" or "cpu, cuda".
+std::string available_backends();
+
+/// backend: "cpu" or "cuda". threads: CPU worker threads (<= 0: all). Throws catgs::Error for
+/// an unknown backend, one not built in, or (CUDA) when no device is usable.
+std::unique_ptr<Renderer> make_renderer(const std::string& backend, Precision precision, int threads = 0);
+
+}  // namespace catgs

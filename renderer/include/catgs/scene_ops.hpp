@@ -1,0 +1,25 @@
+// Scene transformations used to build benchmark scenes from real captures.
+#pragma once
+
+#include <string>
+
+#include "catgs/scene.hpp"
+
+namespace catgs {
+
+/// Per-axis percentile bounds of the positions (world coordinates), e.g. 0.01 and 0.99.
+Bounds percentile_bounds(const Scene& scene, double low, double high);
+
+/// Replicates a scene in an nx x ny grid over the two horizontal axes (those other than
+/// `up_axis`, 0..2). Each copy keeps only the Gaussians inside the scene's 1st..99th
+/// percentile box on those axes (its cell) and is offset by that box's extent, so the copies
+/// tile the plane without overlapping. Throws catgs::Error for nx or ny < 1.
+Scene replicate_grid(const Scene& scene, int nx, int ny, int up_axis);
+
+/// Parses "3x3" into (3, 3); throws catgs::Error naming the text otherwise.
+std::pair<int, int> parse_grid(const std::string& text);
+
+/// Parses "x", "y", "z", "-x", "-y", "-z" into the axis index 0..2 (the sign is ignored here).
+int parse_up_axis(const std::string& text);
+
+}  // namespace catgs
