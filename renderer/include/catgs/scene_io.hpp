@@ -33,7 +33,10 @@ struct LoadReport {
 /// graphdeco 3DGS PLY. Properties are located by name in any order, float or double; extra
 /// properties are ignored; SH degree follows from the number of f_rest_* (0, 9, 24 or 45),
 /// which are stored channel-major (all R coefficients, then G, then B).
-/// Activations are applied: exp to scale_*, sigmoid to opacity, quaternions normalised.
+/// Activations are applied: exp to scale_*, sigmoid to opacity, quaternions normalised
+/// (a quaternion already unit to |norm^2 - 1| <= 2^-22 is kept as it is: normalising a
+/// float unit quaternion again moves ~1% of them by an ulp and would break the exact
+/// write/read round trip).
 Scene read_ply(const std::string& path, const LoadOptions& options = {}, LoadReport* report = nullptr);
 
 /// The 32-byte .splat format: 3 float32 position, 3 float32 linear scale, RGBA uint8
@@ -41,9 +44,11 @@ Scene read_ply(const std::string& path, const LoadOptions& options = {}, LoadRep
 /// in (w, x, y, z) order. SH degree 0.
 Scene read_splat(const std::string& path, const LoadOptions& options = {}, LoadReport* report = nullptr);
 
-/// Binary little-endian graphdeco PLY. scale_* (log) and opacity (logit) are written as
+/// Binary little-endian graphdeco PLY. x, y, z (world coordinates: origin + position,
+/// formed in double), scale_* (log) and opacity (logit, clamped to +-40) are written as
 /// double, so that reading the file back gives bit-identical activated floats; every other
-/// property is float. Positions are written in world coordinates (origin added, in double).
+/// property is float. Exact for positions when the scene's origin is the centre of its
+/// bounds (as after loading with recentre) or zero.
 void write_ply(const Scene& scene, const std::string& path);
 
 /// Opens a scene from a path (.ply or .splat, chosen by extension) or a generator spec
