@@ -24,7 +24,14 @@ inline constexpr std::uint64_t kCityMaxGaussians = 20'000'000;
 CityParams parse_city_spec(const std::string& spec);
 
 /// Generates exactly params.gaussians Gaussians; the same params give bit-identical scenes
-/// on every machine. Positions are relative to scene.origin (the block centre).
+/// on every machine (no libm; built with -ffp-contract=off). Positions are relative to
+/// scene.origin (the block centre). Throws catgs::Error for counts outside [10^4, 2*10^7].
 Scene make_city(const CityParams& params, const Progress& progress = {});
+
+namespace detail {
+/// make_city with an explicit worker count (0 = all cores): tests show the result does not
+/// depend on it.
+Scene make_city_with_threads(const CityParams& params, const Progress& progress, unsigned threads);
+}  // namespace detail
 
 }  // namespace catgs

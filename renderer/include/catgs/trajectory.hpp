@@ -28,12 +28,16 @@ void write_trajectory(const std::vector<Camera>& cameras, const std::string& pat
 ///   survey     lawnmower pattern over the bounds
 ///   flythrough a path with turns and speed changes
 ///   hover      a nearly still camera with small jitter
-/// Keys (all optional): speed (m/s), fps, altitude (m above the bounds' bottom),
-/// pitch (degrees, negative looks down), frames, up (z, y or -y: the world's up axis),
-/// seed. Throws catgs::Error naming any unknown kind, key or bad value.
+/// Keys (all optional, defaults in brackets): speed [8] (m/s), fps [30], altitude [80] (m
+/// above the lowest point of the bounds along up: for up=-y that is bounds.max.y),
+/// pitch [-45] (degrees, negative looks down; for orbit an explicit pitch overrides the
+/// look-at pitch, the yaw still faces the centre), frames [300], up [z] (z, y or -y: the
+/// world's up axis), seed [1]. Defaults are in metres for city-sized scenes: small scenes
+/// need altitude and speed. Throws catgs::Error naming any unknown kind, key or bad value.
 std::vector<Camera> make_trajectory(const std::string& spec, const Bounds& bounds, const Intrinsics& intrinsics);
 
-/// read_trajectory or make_trajectory, by whether spec starts with "builtin:".
+/// make_trajectory for "builtin:..." specs, read_cameras_json for a .json path (its own
+/// intrinsics), read_trajectory otherwise.
 std::vector<Camera> load_trajectory(const std::string& spec, const Bounds& bounds, const Intrinsics& intrinsics);
 
 }  // namespace catgs
