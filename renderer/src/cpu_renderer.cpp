@@ -1,6 +1,10 @@
 #include "catgs/cpu_renderer.hpp"
 
+#include <algorithm>
 #include <chrono>
+#include <cmath>
+#include <limits>
+#include <mutex>
 
 #include "catgs/error.hpp"
 #include "catgs/parallel.hpp"
@@ -14,10 +18,17 @@ namespace {
 // Chunk sizes for parallel_for: large enough that scheduling costs nothing, small enough to
 // balance two to sixteen threads on scenes of 10^4 Gaussians and up.
 constexpr std::size_t kGaussianGrain = 4096;
-constexpr std::size_t kTileGrain = 4;
+constexpr std::size_t kTaskGrain = 4;
 
 // Radix sort digit width: 8 bits keeps the histogram (256 counters) in L1.
 constexpr int kRadixBits = 8;
+
+// A tile that is not split has no partial slots.
+constexpr std::uint32_t kNoSlot = std::numeric_limits<std::uint32_t>::max();
+constexpr std::size_t kTilePixels = static_cast<std::size_t>(kTileSize) * kTileSize;
+
+// The speculative near plane never goes below this, so 1/z stays finite.
+constexpr double kMinSpeculativeNear = 1e-3;
 
 using Clock = std::chrono::steady_clock;
 double elapsed_ms(Clock::time_point since) {
@@ -39,45 +50,133 @@ template <typename T>
 CpuRenderer<T>::CpuRenderer(int threads) : threads_(threads > 0 ? threads : default_thread_count()) {}
 
 template <typename T>
-FrameStats CpuRenderer<T>::render(const Scene& scene, const Camera& camera, const RenderOptions& options, ImageF& out) {
+void CpuRenderer<T>::reset_cache() {
+    planner_.reset();
+}
+
+template <typename T>
+FrameStats CpuRenderer<T>::render(const Scene& scene, const Camera& camera, const RenderOptions& options, ImageF& out,
+                                  const FrameHints* hints) {
     validate(camera.intrinsics, "camera '" + camera.name + "'");
     const View<T> view = make_view<T>(camera, scene.origin, options.near_plane);
+    const FramePlanner::Plan plan = planner_.next(camera, options.catgs, hints);
     FrameStats stats;
+    stats.key_frame = plan.key;
+    stats.window = plan.window;
     const auto start = Clock::now();
     auto t = Clock::now();
-    preprocess(scene, view, options.culling);
-    stats.preprocess_ms = elapsed_ms(t);
-    t = Clock::now();
-    emit_keys(view, options.culling);
-    stats.keys_ms = elapsed_ms(t);
-    t = Clock::now();
-    sort_pairs(view);
-    stats.sort_ms = elapsed_ms(t);
-    t = Clock::now();
-    find_tile_ranges(view, options.culling);
-    stats.ranges_ms = elapsed_ms(t);
+    if (plan.key) {
+        // The window: every pose projected with the near plane lowered by the translation
+        // guard and footprints dilated by the pixel guard, so a pose inside the envelope
+        // finds every Gaussian it needs in the cached lists.
+        Window window;
+        const bool speculative = options.catgs.cache == CacheMode::speculative;
+        window.guard = speculative ? static_cast<T>(options.catgs.guard_px) : T(0);
+        const double near = speculative ? std::max(kMinSpeculativeNear, options.near_plane - options.catgs.guard_translation)
+                                        : options.near_plane;
+        window.near_plane = static_cast<T>(near);
+        for (const Camera& c : plan.poses) window.views.push_back(make_view<T>(c, scene.origin, near));
+        preprocess(scene, view, window, options.culling);
+        stats.preprocess_ms = elapsed_ms(t);
+        t = Clock::now();
+        emit_keys(scene, window, options.culling);
+        stats.keys_ms = elapsed_ms(t);
+        t = Clock::now();
+        sort_pairs(view);
+        stats.sort_ms = elapsed_ms(t);
+        t = Clock::now();
+        find_tile_ranges(view, options.culling);
+        stats.ranges_ms = elapsed_ms(t);
+        t = Clock::now();
+        split_k_ = build_tasks(options.catgs);
+        stats.split_ms = elapsed_ms(t);
+        if (options.catgs.cache != CacheMode::off) planner_.key_rendered(plan, summarize(window, options.culling));
+    } else {
+        reproject(scene, view);
+        stats.preprocess_ms = elapsed_ms(t);
+        if (options.catgs.resort_cached) {
+            t = Clock::now();
+            rekey_pairs();
+            stats.keys_ms = elapsed_ms(t);
+            t = Clock::now();
+            sort_pairs(view);
+            stats.sort_ms = elapsed_ms(t);
+        }
+    }
     t = Clock::now();
     rasterize(view, options, out);
     stats.rasterize_ms = elapsed_ms(t);
+    t = Clock::now();
+    merge(view, options, out);
+    stats.merge_ms = elapsed_ms(t);
     stats.total_ms = elapsed_ms(start);
     stats.pairs = keys_.size();
-    for (std::uint32_t n : tiles_touched_) stats.visible += n > 0;
+    stats.tasks = tasks_.size();
+    stats.split_tasks = tasks_.size() - ranges_.size();
+    stats.split_k = split_k_;
+    for (std::size_t i = 0; i < projected_.size(); ++i) stats.visible += tiles_touched_[i] > 0 && projected_[i].opacity > 0;
     return stats;
 }
 
-// Stage 1: project every Gaussian and count the tiles it touches (0 = culled).
 template <typename T>
-void CpuRenderer<T>::preprocess(const Scene& scene, const View<T>& view, Culling culling) {
+std::uint32_t CpuRenderer<T>::project_window(const Scene& scene, std::size_t i, const Window& window,
+                                             Projected<T>* poses) const {
+    const std::size_t sh_stride = scene.sh_floats_per_gaussian();
+    const GaussianRef g{&scene.positions[3 * i], &scene.scales[3 * i], &scene.rotations[4 * i], scene.opacities[i],
+                        &scene.sh[sh_stride * i], scene.sh_degree};
+    std::uint32_t valid = 0;
+    for (std::size_t k = 0; k < window.views.size(); ++k)
+        if (project_gaussian(g, window.views[k], poses[k])) valid |= 1u << k;
+    return valid;
+}
+
+// Stage 1: project every Gaussian at the actual pose (for rasterizing) and count the tiles of
+// the union of its footprints over the window (0 = not in any list).
+template <typename T>
+void CpuRenderer<T>::preprocess(const Scene& scene, const View<T>& actual, const Window& window, Culling culling) {
     const std::size_t n = scene.count();
+    const int w = static_cast<int>(window.views.size());
     projected_.resize(n);
     tiles_touched_.assign(n, 0);
+    sort_depth_.resize(n);
+    const std::size_t sh_stride = scene.sh_floats_per_gaussian();
+    window_min_depth_ = std::numeric_limits<double>::infinity();
+    std::mutex min_mutex;
+    parallel_for(n, kGaussianGrain, threads_, [&](std::size_t begin, std::size_t end) {
+        Projected<T> poses[kMaxWindow];
+        double chunk_min = std::numeric_limits<double>::infinity();
+        for (std::size_t i = begin; i < end; ++i) {
+            const std::uint32_t valid = project_window(scene, i, window, poses);
+            tiles_touched_[i] =
+                for_each_window_tile<kMaxWindow>(poses, valid, w, culling, window.guard, window.views[0], [](std::uint32_t) {});
+            if (tiles_touched_[i] == 0) continue;
+            // Keys sort by the depth at the first pose where the Gaussian is visible (the key
+            // pose, so the key frame itself is exact); the envelope needs the nearest depth
+            // at any pose.
+            sort_depth_[i] = static_cast<float>(poses[first_valid_pose(valid)].depth);
+            for (int k = 0; k < w; ++k)
+                if (valid >> k & 1u) chunk_min = std::min(chunk_min, static_cast<double>(poses[k].depth));
+            const GaussianRef g{&scene.positions[3 * i], &scene.scales[3 * i], &scene.rotations[4 * i],
+                                scene.opacities[i], &scene.sh[sh_stride * i], scene.sh_degree};
+            if (!project_gaussian(g, actual, projected_[i])) projected_[i].opacity = T(0);
+        }
+        std::lock_guard lock(min_mutex);
+        window_min_depth_ = std::min(window_min_depth_, chunk_min);
+    });
+}
+
+// Cached frame: only the Gaussians in the cached lists are projected again, at the actual
+// pose: means, conics, colours. Culled ones get opacity 0, which the blend skips.
+template <typename T>
+void CpuRenderer<T>::reproject(const Scene& scene, const View<T>& actual) {
+    const std::size_t n = tiles_touched_.size();
     const std::size_t sh_stride = scene.sh_floats_per_gaussian();
     parallel_for(n, kGaussianGrain, threads_, [&](std::size_t begin, std::size_t end) {
         for (std::size_t i = begin; i < end; ++i) {
+            if (tiles_touched_[i] == 0) continue;
             const GaussianRef g{&scene.positions[3 * i], &scene.scales[3 * i], &scene.rotations[4 * i],
                                 scene.opacities[i], &scene.sh[sh_stride * i], scene.sh_degree};
-            if (!project_gaussian(g, view, projected_[i])) continue;
-            tiles_touched_[i] = for_each_touched_tile(projected_[i], culling, view, [](std::uint32_t) {});
+            if (!project_gaussian(g, actual, projected_[i])) projected_[i].opacity = T(0);
         }
     });
 }
@@ -85,8 +184,9 @@ void CpuRenderer<T>::preprocess(const Scene& scene, const View<T>& view, Culling
 // Stage 2: exclusive scan of the tile counts (64-bit), then emit (tile | depth) keys in
 // Gaussian order through the same predicate the count used.
 template <typename T>
-void CpuRenderer<T>::emit_keys(const View<T>& view, Culling culling) {
+void CpuRenderer<T>::emit_keys(const Scene& scene, const Window& window, Culling culling) {
     const std::size_t n = tiles_touched_.size();
+    const int w = static_cast<int>(window.views.size());
     offsets_.resize(n);
     std::uint64_t total = 0;
     for (std::size_t i = 0; i < n; ++i) {
@@ -96,15 +196,30 @@ void CpuRenderer<T>::emit_keys(const View<T>& view, Culling culling) {
     keys_.resize(total);
     values_.resize(total);
     parallel_for(n, kGaussianGrain, threads_, [&](std::size_t begin, std::size_t end) {
+        Projected<T> poses[kMaxWindow];
         for (std::size_t i = begin; i < end; ++i) {
             if (tiles_touched_[i] == 0) continue;
             std::uint64_t slot = offsets_[i];
-            const float depth = static_cast<float>(projected_[i].depth);
-            for_each_touched_tile(projected_[i], culling, view, [&](std::uint32_t tile) {
-                keys_[slot] = make_sort_key(tile, depth);
-                values_[slot] = static_cast<std::uint32_t>(i);
-                ++slot;
-            });
+            const std::uint32_t valid = project_window(scene, i, window, poses);
+            for_each_window_tile<kMaxWindow>(poses, valid, w, culling, window.guard, window.views[0],
+                                             [&](std::uint32_t tile) {
+                                                 keys_[slot] = make_sort_key(tile, sort_depth_[i]);
+                                                 values_[slot] = static_cast<std::uint32_t>(i);
+                                                 ++slot;
+                                             });
+        }
+    });
+}
+
+// Cached frame, re-sort: the cached pairs keep their tiles and take the current depth of
+// their Gaussian, so a stable sort restores exact depth order within every tile. Gaussians
+// culled at this pose keep their old key (they are skipped by opacity 0 anyway).
+template <typename T>
+void CpuRenderer<T>::rekey_pairs() {
+    parallel_for(keys_.size(), kGaussianGrain * 16, threads_, [&](std::size_t begin, std::size_t end) {
+        for (std::size_t j = begin; j < end; ++j) {
+            const Projected<T>& p = projected_[values_[j]];
+            if (p.opacity > 0) keys_[j] = make_sort_key(key_tile(keys_[j]), static_cast<float>(p.depth));
         }
     });
 }
@@ -157,28 +272,102 @@ void CpuRenderer<T>::find_tile_ranges(const View<T>& view, Culling culling) {
     }
 }
 
-// Stage 5: one tile at a time, each pixel blends its tile's list front to back.
+// Stage 5 (CaT-GS Algorithm 1): one task per tile, then the extra sub-tasks of every tile
+// longer than k appended with their (tile, split index) label; split tiles get partial slots.
+// Returns the k used (0: no splitting).
+template <typename T>
+std::uint32_t CpuRenderer<T>::build_tasks(const CatgsOptions& options) {
+    std::uint32_t k = options.split_k;
+    if (options.split_auto) {
+        std::uint64_t nonempty = 0, pairs = 0;
+        for (const TileRange& r : ranges_) {
+            nonempty += r.end > r.begin;
+            pairs += r.end - r.begin;
+        }
+        const double mean = nonempty ? static_cast<double>(pairs) / static_cast<double>(nonempty) : 0.0;
+        k = std::max(kAutoSplitFloor, static_cast<std::uint32_t>(std::ceil(kAutoSplitFactor * mean)));
+    }
+    const std::size_t tiles = ranges_.size();
+    tasks_.resize(tiles);
+    split_slot_.assign(tiles, kNoSlot);
+    std::uint32_t slots = 0;
+    for (std::uint32_t t = 0; t < tiles; ++t) {
+        tasks_[t] = {t, 0};
+        const std::uint32_t splits = split_count(ranges_[t].end - ranges_[t].begin, k);
+        if (splits == 0) continue;
+        split_slot_[t] = slots;
+        slots += splits + 1;
+        for (std::uint32_t i = 1; i <= splits; ++i) tasks_.push_back({t, i});
+    }
+    partials_.resize(static_cast<std::size_t>(slots) * kTilePixels);
+    return k;
+}
+
+// Stage 6: every task blends its slice of its tile's list from T = 1. A tile that is not
+// split writes its pixels; a sub-task of a split tile writes (R, A) to its partial slot.
 template <typename T>
 void CpuRenderer<T>::rasterize(const View<T>& view, const RenderOptions& options, ImageF& out) {
     out.resize(view.width, view.height);
     const Vec3<T> background{static_cast<T>(options.background[0]), static_cast<T>(options.background[1]),
                              static_cast<T>(options.background[2])};
-    const std::size_t tiles = ranges_.size();
-    parallel_for(tiles, kTileGrain, threads_, [&](std::size_t begin, std::size_t end) {
+    const T tail_threshold = static_cast<T>(options.catgs.split_tail_transmittance);
+    parallel_for(tasks_.size(), kTaskGrain, threads_, [&](std::size_t begin, std::size_t end) {
         std::vector<const Projected<T>*> list;
-        for (std::size_t tile = begin; tile < end; ++tile) {
-            const TileRange range = ranges_[tile];
+        for (std::size_t task = begin; task < end; ++task) {
+            const TileTask tt = tasks_[task];
+            const TileRange range = ranges_[tt.tile];
+            std::uint64_t first = range.begin, last = range.end;
+            if (split_slot_[tt.tile] != kNoSlot) subtask_range(range.begin, range.end, split_k_, tt.index, first, last);
             list.clear();
-            for (std::uint64_t j = range.begin; j < range.end; ++j) list.push_back(&projected_[values_[j]]);
-            const int x0 = static_cast<int>(tile % view.tiles_x) * kTileSize;
-            const int y0 = static_cast<int>(tile / view.tiles_x) * kTileSize;
+            for (std::uint64_t j = first; j < last; ++j) list.push_back(&projected_[values_[j]]);
+            const T threshold = tt.index > 0 ? tail_threshold : static_cast<T>(kMinTransmittance);
+            const int x0 = static_cast<int>(tt.tile % view.tiles_x) * kTileSize;
+            const int y0 = static_cast<int>(tt.tile / view.tiles_x) * kTileSize;
             const int x1 = std::min(x0 + kTileSize, view.width), y1 = std::min(y0 + kTileSize, view.height);
             for (int y = y0; y < y1; ++y)
                 for (int x = x0; x < x1; ++x) {
                     PixelAccumulator<T> acc;
                     const T px = static_cast<T>(x) + T(0.5), py = static_cast<T>(y) + T(0.5);
                     for (const Projected<T>* g : list)
-                        if (blend_gaussian(acc, g->mean, g->conic, g->opacity, g->colour, px, py)) break;
+                        if (blend_gaussian(acc, g->mean, g->conic, g->opacity, g->colour, px, py, threshold)) break;
+                    if (split_slot_[tt.tile] == kNoSlot) {
+                        const Vec3<T> c = finish_pixel(acc, background);
+                        float* dst = &out.rgb[3 * (static_cast<std::size_t>(y) * view.width + x)];
+                        dst[0] = static_cast<float>(c.x);
+                        dst[1] = static_cast<float>(c.y);
+                        dst[2] = static_cast<float>(c.z);
+                    } else {
+                        const std::size_t slot = split_slot_[tt.tile] + tt.index;
+                        partials_[slot * kTilePixels + static_cast<std::size_t>((y - y0) * kTileSize + (x - x0))] =
+                            Partial<T>{acc.colour, acc.transmittance};
+                    }
+                }
+        }
+    });
+}
+
+// Stage 7: composite each split tile's sub-tasks front to back.
+template <typename T>
+void CpuRenderer<T>::merge(const View<T>& view, const RenderOptions& options, ImageF& out) {
+    const Vec3<T> background{static_cast<T>(options.background[0]), static_cast<T>(options.background[1]),
+                             static_cast<T>(options.background[2])};
+    const std::size_t tiles = ranges_.size();
+    parallel_for(tiles, kTaskGrain, threads_, [&](std::size_t begin, std::size_t end) {
+        for (std::size_t tile = begin; tile < end; ++tile) {
+            if (split_slot_[tile] == kNoSlot) continue;
+            const std::uint32_t parts = split_count(ranges_[tile].end - ranges_[tile].begin, split_k_) + 1;
+            const int x0 = static_cast<int>(tile % view.tiles_x) * kTileSize;
+            const int y0 = static_cast<int>(tile / view.tiles_x) * kTileSize;
+            const int x1 = std::min(x0 + kTileSize, view.width), y1 = std::min(y0 + kTileSize, view.height);
+            for (int y = y0; y < y1; ++y)
+                for (int x = x0; x < x1; ++x) {
+                    MergeState<T> m;
+                    const std::size_t pixel = static_cast<std::size_t>((y - y0) * kTileSize + (x - x0));
+                    for (std::uint32_t i = 0; i < parts && !m.done; ++i)
+                        merge_partial(m, partials_[(split_slot_[tile] + i) * kTilePixels + pixel]);
+                    PixelAccumulator<T> acc;
+                    acc.colour = m.colour;
+                    acc.transmittance = m.transmittance;
                     const Vec3<T> c = finish_pixel(acc, background);
                     float* dst = &out.rgb[3 * (static_cast<std::size_t>(y) * view.width + x)];
                     dst[0] = static_cast<float>(c.x);
@@ -187,6 +376,34 @@ void CpuRenderer<T>::rasterize(const View<T>& view, const RenderOptions& options
                 }
         }
     });
+}
+
+// What the planner needs to bound screen motion: the nearest cached depth over the window's
+// poses, the mean inverse depth at the key pose, and the largest footprint that does not
+// already cover the whole grid (a full-grid footprint cannot gain tiles).
+template <typename T>
+KeyFrameSummary CpuRenderer<T>::summarize(const Window& window, Culling culling) const {
+    KeyFrameSummary s;
+    s.min_depth = window_min_depth_;
+    double inverse_sum = 0;
+    std::uint64_t visible = 0;
+    const View<T>& key = window.views[0];
+    for (std::size_t i = 0; i < projected_.size(); ++i) {
+        if (tiles_touched_[i] == 0) continue;
+        const Projected<T>& p = projected_[i];
+        if (!(p.opacity > 0)) continue;
+        ++visible;
+        inverse_sum += 1.0 / static_cast<double>(p.depth);
+        const TileRect r = tile_rect(p, culling, key.tiles_x, key.tiles_y);
+        if (!(r.x0 == 0 && r.y0 == 0 && r.x1 == key.tiles_x && r.y1 == key.tiles_y)) {
+            const Vec2<T> e = footprint_extent(p, culling);
+            s.max_extent_px = std::max({s.max_extent_px, static_cast<double>(e.x), static_cast<double>(e.y)});
+        }
+    }
+    s.mean_inverse_depth = visible ? inverse_sum / static_cast<double>(visible) : 0.0;
+    if (!std::isfinite(s.min_depth)) s.min_depth = static_cast<double>(window.near_plane);
+    s.min_depth = std::max(s.min_depth, static_cast<double>(window.near_plane));
+    return s;
 }
 
 template class CpuRenderer<float>;

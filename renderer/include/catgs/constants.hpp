@@ -53,4 +53,8 @@ inline constexpr double kBBoxEigenFloor = 0.1;
 /// The 3-sigma extent of the graphdeco baseline (`bbox3sigma`).
 inline constexpr double kBBoxSigmas = 3.0;
 
+/// Most poses a speculative window may hold (CaT-GS: W in 1..16); a window's validity mask
+/// is a 32-bit word.
+inline constexpr int kMaxWindow = 16;
+
 }  // namespace catgs

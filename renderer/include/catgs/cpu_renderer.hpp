@@ -1,6 +1,9 @@
 // The CPU backend and reference renderer. It runs the same stages as the GPU:
-//   preprocess -> tile keys -> sort -> tile ranges -> rasterize
+//   preprocess -> tile keys -> sort -> tile ranges -> split -> rasterize -> merge
 // each a named member with its own buffer, using the host-device math in stages/.
+// With the CaT-GS cache on, a key frame preprocesses every Gaussian against the window's W
+// poses (the union of its footprints) and the following frames of the window only re-project
+// the cached Gaussians before rasterizing the cached lists (cache.hpp).
 // Precision is a template parameter (float and double are instantiated). Deterministic:
 // keys are emitted in Gaussian order from a prefix-sum layout and sorted stably, so equal
 // depths in a tile keep Gaussian-index order; the result is independent of thread count.
@@ -9,17 +12,25 @@
 #include <cstdint>
 #include <vector>
 
+#include "catgs/cache.hpp"
 #include "catgs/camera.hpp"
 #include "catgs/image.hpp"
 #include "catgs/render_options.hpp"
 #include "catgs/scene.hpp"
 #include "catgs/stages/project.hpp"
+#include "catgs/stages/split.hpp"
 
 namespace catgs {
 
 /// [begin, end) into the sorted pair arrays. 64-bit: pair counts can pass 2^32.
 struct TileRange {
     std::uint64_t begin = 0, end = 0;
+};
+
+/// A rasterizer task: sub-task `index` of `tile` (index 0 for every tile; 1.. for the extra
+/// sub-tasks of split tiles, the CaT-GS label).
+struct TileTask {
+    std::uint32_t tile = 0, index = 0;
 };
 
 template <typename T>
@@ -29,8 +40,12 @@ public:
     explicit CpuRenderer(int threads = 0);
 
     /// Renders one frame into `out` (resized to the camera's image). Throws catgs::Error on
-    /// invalid intrinsics.
-    FrameStats render(const Scene& scene, const Camera& camera, const RenderOptions& options, ImageF& out);
+    /// invalid intrinsics. `hints` may carry the client's flight plan or velocity.
+    FrameStats render(const Scene& scene, const Camera& camera, const RenderOptions& options, ImageF& out,
+                      const FrameHints* hints = nullptr);
+
+    /// Forgets the inter-frame cache and the pose history (a new stream or a new scene).
+    void reset_cache();
 
     // Stage outputs of the last frame, for tests and tools.
     const std::vector<Projected<T>>& projected() const { return projected_; }
@@ -38,23 +53,45 @@ public:
     const std::vector<std::uint64_t>& sorted_keys() const { return keys_; }
     const std::vector<std::uint32_t>& sorted_values() const { return values_; }
     const std::vector<TileRange>& tile_ranges() const { return ranges_; }
+    const std::vector<TileTask>& tasks() const { return tasks_; }
 
 private:
-    void preprocess(const Scene& scene, const View<T>& view, Culling culling);
-    void emit_keys(const View<T>& view, Culling culling);
+    struct Window {
+        std::vector<View<T>> views;  // pose 0 is the actual (key) pose
+        T guard = T(0);
+        T near_plane = T(0);          // lowered by the translation guard for speculation
+    };
+    void preprocess(const Scene& scene, const View<T>& actual, const Window& window, Culling culling);
+    void reproject(const Scene& scene, const View<T>& actual);
+    void emit_keys(const Scene& scene, const Window& window, Culling culling);
     void sort_pairs(const View<T>& view);
+    void rekey_pairs();
     void find_tile_ranges(const View<T>& view, Culling culling);
+    std::uint32_t build_tasks(const CatgsOptions& options);
     void rasterize(const View<T>& view, const RenderOptions& options, ImageF& out);
+    void merge(const View<T>& view, const RenderOptions& options, ImageF& out);
+    KeyFrameSummary summarize(const Window& window, Culling culling) const;
+
+    /// Projects Gaussian i against every pose of the window into `poses`; returns the mask of
+    /// poses where it is visible. Shared by the count and the emit pass.
+    std::uint32_t project_window(const Scene& scene, std::size_t i, const Window& window, Projected<T>* poses) const;
 
     int threads_;
-    std::vector<Projected<T>> projected_;         // preprocess
-    std::vector<std::uint32_t> tiles_touched_;    // preprocess: 0 = culled
+    FramePlanner planner_;
+    std::uint32_t split_k_ = 0;                   // k of the current task list
+    double window_min_depth_ = 0;                 // preprocess: nearest depth at any pose of the window
+    std::vector<Projected<T>> projected_;         // preprocess: at the actual pose; opacity 0 = culled
+    std::vector<std::uint32_t> tiles_touched_;    // preprocess: union tile count, 0 = not cached
+    std::vector<float> sort_depth_;               // preprocess: depth the keys sort by
     std::vector<std::uint64_t> offsets_;          // keys: exclusive scan of tiles_touched_
     std::vector<std::uint64_t> keys_;             // keys, then sorted
     std::vector<std::uint32_t> values_;           // Gaussian index per key
     std::vector<std::uint64_t> sort_keys_tmp_;    // sort: ping-pong buffers
     std::vector<std::uint32_t> sort_values_tmp_;
     std::vector<TileRange> ranges_;               // tile ranges
+    std::vector<TileTask> tasks_;                 // split: tiles, then extra sub-tasks
+    std::vector<std::uint32_t> split_slot_;       // split: first partial slot of a split tile, or kNoSlot
+    std::vector<Partial<T>> partials_;            // rasterize: per slot, 256 pixels of (R, A)
 };
 
 extern template class CpuRenderer<float>;

@@ -5,6 +5,7 @@
 #include <cstdint>
 #include <string>
 
+#include "catgs/cache.hpp"
 #include "catgs/constants.hpp"
 #include "catgs/stages/tiles.hpp"
 
@@ -14,6 +15,8 @@ struct RenderOptions {
     Culling culling = Culling::opacity_aware;
     std::array<float, 3> background{0.0f, 0.0f, 0.0f};
     double near_plane = kDefaultNearPlane;
+    /// CaT-GS: tile task splitting, the speculative inter-frame cache and its window.
+    CatgsOptions catgs;
 };
 
 /// Parses "exact", "bbox3sigma", "opacity-aware"; throws catgs::Error listing them otherwise.
@@ -26,10 +29,16 @@ struct FrameStats {
     std::uint64_t pairs = 0;    ///< tile-Gaussian pairs emitted (render length)
     std::uint64_t arena_bytes = 0;  ///< device memory held by the renderer's arenas (GPU)
     int bands = 1;              ///< horizontal bands the frame was rendered in (GPU overflow path)
+    bool key_frame = true;      ///< false: drawn from the inter-frame cache
+    int window = 1;             ///< W of the window this frame belongs to
+    std::uint64_t tasks = 0;    ///< rasterizer tasks: tiles plus extra split sub-tasks
+    std::uint64_t split_tasks = 0;  ///< extra sub-tasks from splitting
+    std::uint32_t split_k = 0;  ///< the k used this frame (0: no splitting)
     /// keys_ms covers the emit pass, scan_ms the prefix sum of tile counts (the CPU backend
     /// folds its scan into keys_ms), copy_ms the copy of the image to the host (GPU).
-    double preprocess_ms = 0, scan_ms = 0, keys_ms = 0, sort_ms = 0, ranges_ms = 0, rasterize_ms = 0, copy_ms = 0,
-           total_ms = 0;
+    /// split_ms covers building the task list, merge_ms the merge of split sub-tasks.
+    double preprocess_ms = 0, scan_ms = 0, keys_ms = 0, sort_ms = 0, ranges_ms = 0, split_ms = 0, rasterize_ms = 0,
+           merge_ms = 0, copy_ms = 0, total_ms = 0;
 };
 
 }  // namespace catgs

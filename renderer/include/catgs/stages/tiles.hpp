@@ -53,29 +53,44 @@ CATGS_HD T opacity_level(T opacity) {
     return level * static_cast<T>(1.0 + kOpacityLevelRelativeSlack) + static_cast<T>(kOpacityLevelAbsoluteSlack);
 }
 
-/// Tile rectangle of a Gaussian under a culling mode (exact mode: the whole grid).
+/// Half extents (pixels, x and y) of a footprint: graphdeco's 3-sigma radius of the major
+/// axis (both axes) for bbox3sigma, the axis-aligned box of the ellipse q <= level for
+/// opacity-aware culling, negative when the Gaussian cannot reach alpha 1/255 anywhere.
 template <typename T>
-CATGS_HD TileRect tile_rect(const Projected<T>& g, Culling mode, int tiles_x, int tiles_y) {
-    const T tile = static_cast<T>(kTileSize);
-    if (mode == Culling::exact) return {0, 0, tiles_x, tiles_y};
+CATGS_HD Vec2<T> footprint_extent(const Projected<T>& g, Culling mode) {
     if (mode == Culling::bbox3sigma) {
-        // graphdeco: radius = ceil(3 sqrt(lambda_max)) around the mean in its pixel
-        // convention (pixel i at coordinate i), i.e. our mean minus 0.5.
         const T mid = T(0.5) * (g.cov.x + g.cov.z);
         const T det = g.cov.x * g.cov.z - g.cov.y * g.cov.y;
         const T spread = mid * mid - det;
         const T floor_spread = static_cast<T>(kBBoxEigenFloor);
         const T lambda = mid + sqrt_of(spread > floor_spread ? spread : floor_spread);
         const T radius = ceil_of(static_cast<T>(kBBoxSigmas) * sqrt_of(lambda));
+        return {radius, radius};
+    }
+    const T level = opacity_level(g.opacity);
+    if (!(level > T(0))) return {T(-1), T(-1)};
+    // Axis-aligned half extents of the ellipse q <= level: sqrt(level * Sigma'_ii).
+    return {sqrt_of(level * g.cov.x), sqrt_of(level * g.cov.z)};
+}
+
+/// Tile rectangle of a Gaussian under a culling mode (exact mode: the whole grid), with the
+/// footprint dilated by `guard` pixels (speculative windows; 0 for a single frame).
+template <typename T>
+CATGS_HD TileRect tile_rect(const Projected<T>& g, Culling mode, int tiles_x, int tiles_y, T guard = T(0)) {
+    const T tile = static_cast<T>(kTileSize);
+    if (mode == Culling::exact) return {0, 0, tiles_x, tiles_y};
+    const Vec2<T> extent = footprint_extent(g, mode);
+    if (mode == Culling::bbox3sigma) {
+        // graphdeco's rectangle around the mean in its pixel convention (pixel i at
+        // coordinate i), i.e. our mean minus 0.5.
+        const T radius = extent.x + guard;
         const T px = g.mean.x - T(0.5), py = g.mean.y - T(0.5);
         return {clamped_floor((px - radius) / tile, 0, tiles_x), clamped_floor((py - radius) / tile, 0, tiles_y),
                 clamped_floor((px + radius + tile - T(1)) / tile, 0, tiles_x),
                 clamped_floor((py + radius + tile - T(1)) / tile, 0, tiles_y)};
     }
-    const T level = opacity_level(g.opacity);
-    if (!(level > T(0))) return {0, 0, 0, 0};
-    // Axis-aligned half extents of the ellipse q <= level: sqrt(level * Sigma'_ii).
-    const T hx = sqrt_of(level * g.cov.x), hy = sqrt_of(level * g.cov.z);
+    if (!(extent.x >= T(0))) return {0, 0, 0, 0};
+    const T hx = extent.x + guard, hy = extent.y + guard;
     // Pixel i (sampled at i + 0.5) can be inside when mean - h <= i + 0.5 <= mean + h.
     const T lo_x = g.mean.x - hx - T(0.5), hi_x = g.mean.x + hx - T(0.5);
     const T lo_y = g.mean.y - hy - T(0.5), hi_y = g.mean.y + hy - T(0.5);
@@ -101,15 +116,18 @@ CATGS_INLINE T min_conic_on_edge(Vec3<T> conic, T fixed, T lo, T hi, bool along_
 }
 
 /// Exact test: does the ellipse q <= level reach a pixel centre region of tile (tx, ty)?
-/// The region is the rectangle spanned by the tile's pixel centres (clipped to the image);
-/// q is minimised over it: zero if the mean is inside, else on one of its four edges.
+/// The region is the rectangle spanned by the tile's pixel centres (clipped to the image),
+/// grown by `guard` pixels on every side for speculative windows (a square dilation of the
+/// ellipse, which contains the round one); q is minimised over it: zero if the mean is
+/// inside, else on one of its four edges.
 template <typename T>
-CATGS_HD bool ellipse_touches_tile(const Projected<T>& g, T level, int tx, int ty, int width, int height) {
+CATGS_HD bool ellipse_touches_tile(const Projected<T>& g, T level, int tx, int ty, int width, int height,
+                                   T guard = T(0)) {
     const int px0 = tx * kTileSize, py0 = ty * kTileSize;
     const int px1 = (px0 + kTileSize < width ? px0 + kTileSize : width) - 1;
     const int py1 = (py0 + kTileSize < height ? py0 + kTileSize : height) - 1;
-    const T x0 = static_cast<T>(px0) + T(0.5) - g.mean.x, x1 = static_cast<T>(px1) + T(0.5) - g.mean.x;
-    const T y0 = static_cast<T>(py0) + T(0.5) - g.mean.y, y1 = static_cast<T>(py1) + T(0.5) - g.mean.y;
+    const T x0 = static_cast<T>(px0) + T(0.5) - guard - g.mean.x, x1 = static_cast<T>(px1) + T(0.5) + guard - g.mean.x;
+    const T y0 = static_cast<T>(py0) + T(0.5) - guard - g.mean.y, y1 = static_cast<T>(py1) + T(0.5) + guard - g.mean.y;
     if (x0 <= T(0) && x1 >= T(0) && y0 <= T(0) && y1 >= T(0)) return true;
     T q = min_conic_on_edge(g.conic, x0, y0, y1, true);
     T e = min_conic_on_edge(g.conic, x1, y0, y1, true);
@@ -128,30 +146,67 @@ struct TileRows {
     int end = 1 << 30;
 };
 
-/// Calls emit(tile_id) for every tile the Gaussian touches under `mode` (within `rows`) and
-/// returns how many. In exact mode each Gaussian emits one entry for tile 0: the tile-ranges
-/// stage then gives that single list to every tile. Used by the count and the emit pass alike.
-template <typename T, typename Emit>
-CATGS_HD std::uint32_t for_each_touched_tile(const Projected<T>& g, Culling mode, const View<T>& view, Emit&& emit,
-                                             TileRows rows = {}) {
+/// The tile predicate of count and emit. Calls emit(tile_id) for every tile in the union of
+/// the footprints of the poses whose bit is set in `valid` (projections poses[0..window)),
+/// each dilated by `guard` pixels, within `rows`; returns how many.
+///
+/// One pose with guard 0 is the single-frame case (for_each_touched_tile). Several poses are
+/// CaT-GS's speculative multi-frame preprocessing: at a key frame each Gaussian is projected
+/// against all W poses of the window and gets the union of its footprints, so the frames of
+/// the window can reuse the sorted lists (see cache.hpp for the guard band's guarantee).
+/// In exact mode each Gaussian emits one entry for tile 0: the tile-ranges stage then gives
+/// that single list to every tile.
+template <int MaxWindow, typename T, typename Emit>
+CATGS_HD std::uint32_t for_each_window_tile(const Projected<T>* poses, std::uint32_t valid, int window, Culling mode,
+                                            T guard, const View<T>& view, Emit&& emit, TileRows rows = {}) {
+    if (valid == 0) return 0;
     if (mode == Culling::exact) {
         emit(std::uint32_t{0});
         return 1;
     }
-    TileRect r = tile_rect(g, mode, view.tiles_x, view.tiles_y);
-    r.y0 = r.y0 > rows.begin ? r.y0 : rows.begin;
-    r.y1 = r.y1 < rows.end ? r.y1 : rows.end;
-    if (r.empty()) return 0;
+    TileRect rects[MaxWindow];
+    TileRect u{view.tiles_x, view.tiles_y, 0, 0};
+    for (int k = 0; k < window; ++k) {
+        rects[k] = (valid >> k & 1u) ? tile_rect(poses[k], mode, view.tiles_x, view.tiles_y, guard) : TileRect{0, 0, 0, 0};
+        if (rects[k].empty()) continue;
+        u.x0 = rects[k].x0 < u.x0 ? rects[k].x0 : u.x0;
+        u.y0 = rects[k].y0 < u.y0 ? rects[k].y0 : u.y0;
+        u.x1 = rects[k].x1 > u.x1 ? rects[k].x1 : u.x1;
+        u.y1 = rects[k].y1 > u.y1 ? rects[k].y1 : u.y1;
+    }
+    u.y0 = u.y0 > rows.begin ? u.y0 : rows.begin;
+    u.y1 = u.y1 < rows.end ? u.y1 : rows.end;
+    if (u.empty()) return 0;
     std::uint32_t n = 0;
-    const T level = mode == Culling::opacity_aware ? opacity_level(g.opacity) : T(0);
-    for (int ty = r.y0; ty < r.y1; ++ty)
-        for (int tx = r.x0; tx < r.x1; ++tx) {
-            if (mode == Culling::opacity_aware && !ellipse_touches_tile(g, level, tx, ty, view.width, view.height))
-                continue;
+    for (int ty = u.y0; ty < u.y1; ++ty)
+        for (int tx = u.x0; tx < u.x1; ++tx) {
+            bool hit = false;
+            for (int k = 0; k < window && !hit; ++k) {
+                const TileRect& r = rects[k];
+                hit = tx >= r.x0 && tx < r.x1 && ty >= r.y0 && ty < r.y1 &&
+                      (mode != Culling::opacity_aware ||
+                       ellipse_touches_tile(poses[k], opacity_level(poses[k].opacity), tx, ty, view.width, view.height,
+                                            guard));
+            }
+            if (!hit) continue;
             emit(static_cast<std::uint32_t>(ty * view.tiles_x + tx));
             ++n;
         }
     return n;
+}
+
+/// The first pose set in `valid` (not 0): the pose whose depth orders a Gaussian's keys.
+CATGS_INLINE int first_valid_pose(std::uint32_t valid) {
+    int k = 0;
+    while (!(valid >> k & 1u)) ++k;
+    return k;
+}
+
+/// The single-frame predicate: the tiles one projected Gaussian touches under `mode`.
+template <typename T, typename Emit>
+CATGS_HD std::uint32_t for_each_touched_tile(const Projected<T>& g, Culling mode, const View<T>& view, Emit&& emit,
+                                             TileRows rows = {}) {
+    return for_each_window_tile<1>(&g, 1u, 1, mode, T(0), view, emit, rows);
 }
 
 /// Sort key: tile id in the high 32 bits, the float bits of the view depth in the low 32.

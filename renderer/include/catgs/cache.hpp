@@ -1,0 +1,140 @@
+// CaT-GS frame planning, shared by every backend: which frames are key frames, which poses a
+// key frame speculates on, the envelope of poses its cache covers, and the motion-adaptive
+// window W.
+//
+// Guarantee (README states it too): a frame is drawn from the cache only when it has the key
+// frame's intrinsics and resolution and its pose lies within the envelope: within `guard_px`
+// of screen motion of one of the speculated poses, by a first-order bound over every cached
+// Gaussian (translation over the nearest cached depth, rotation, and the growth of the
+// largest cached footprint), and within `guard_translation` metres of it. Every footprint was
+// dilated by guard_px at every speculated pose, so then every tile's cached list holds every
+// Gaussian the full per-frame pipeline would put there. Otherwise the frame is a key frame.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <deque>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "catgs/camera.hpp"
+#include "catgs/constants.hpp"
+
+namespace catgs {
+
+enum class CacheMode {
+    off,          ///< every frame runs the full pipeline
+    speculative,  ///< CaT-GS: key frames preprocess the whole window, frames in it reuse lists
+    unspeculated, ///< reuse the key frame's lists with no speculation and no envelope check:
+                  ///< only to demonstrate the stripe artifacts speculation removes
+};
+
+struct CatgsOptions {
+    /// Tile task splitting: lists longer than split_k entries become sub-tasks; 0 = off.
+    std::uint32_t split_k = 0;
+    /// Derive k per frame from the list lengths: max(kAutoSplitFloor, kAutoSplitFactor x the
+    /// mean length of the non-empty lists). Overrides split_k.
+    bool split_auto = false;
+    /// Early-termination threshold of the sub-tasks after the first (the paper raises it;
+    /// the default, 1e-4, leaves the image unchanged).
+    double split_tail_transmittance = kMinTransmittance;
+
+    CacheMode cache = CacheMode::off;
+    /// Cached frames re-sort their lists by the current depth (tiles unchanged, so only the
+    /// depth bits of the keys change). Without it the key frame's depth order is reused for
+    /// the whole window, as in the paper; measured on the built-in city, a slow orbit then
+    /// differs from the full render by up to ~120 levels in places where coplanar layers
+    /// (windows on facades, markings on roads) swap order, so it is on by default.
+    bool resort_cached = true;
+    int window = 4;              ///< initial (adaptive) or fixed W, 1..16
+    bool adaptive_window = true;
+    double guard_px = 2.0;       ///< footprint dilation and envelope radius, pixels
+    double guard_translation = 0.25;  ///< envelope radius in metres (also lowers the near plane)
+    /// Screen motion (pixels) a window may span before W shrinks: one tile.
+    double window_motion_budget_px = 16.0;
+};
+
+/// Lists this many entries long or shorter are never split by the automatic k.
+inline constexpr std::uint32_t kAutoSplitFloor = 256;
+/// Automatic k = this many times the mean non-empty list length.
+inline constexpr double kAutoSplitFactor = 4.0;
+
+/// Optional per-frame knowledge from the client.
+struct FrameHints {
+    /// The camera's next poses (a flight plan), oldest first; used for speculation instead of
+    /// extrapolating the pose history.
+    std::vector<Camera> plan;
+    /// Reported velocity: linear (m/s, world) and angular (rad/s, magnitude).
+    std::optional<std::array<double, 3>> linear_velocity;
+    std::optional<double> angular_speed;
+};
+
+/// Motion-adaptive window size. W starts at `initial` and stays in [1, 16]. At each key frame
+/// it is fed the expected screen motion per frame (pixels); the target is the largest W whose
+/// window spans at most the motion budget. W shrinks to the target at once (render length grows
+/// fast with W while moving: the paper's +4% at W=4, +44% at 8, +140% at 16), and grows only
+/// when two consecutive key frames ask for more with a 25% margin, at most doubling, so it does
+/// not oscillate around a boundary.
+class WindowController {
+public:
+    explicit WindowController(int initial = 4, double budget_px = 16.0);
+    int update(double motion_px_per_frame);
+    int window() const { return window_; }
+
+private:
+    int window_;
+    double budget_px_;
+    int grow_votes_ = 0;
+};
+
+/// The angle (radians) of the rotation between two poses.
+double rotation_angle(const Pose& a, const Pose& b);
+
+/// First-order bound (pixels) on how far any footprint moves or grows on screen between
+/// poses a and b (same intrinsics), for Gaussians at depth >= min_depth whose footprint
+/// half-extent is at most max_extent_px.
+double screen_motion_bound(const Camera& a, const Camera& b, double min_depth, double max_extent_px);
+
+/// What a backend reports about the key frame it rendered.
+struct KeyFrameSummary {
+    double min_depth = 0;       ///< nearest depth of a cached Gaussian over the window's poses
+    /// Mean of 1/depth over the visible Gaussians at the key pose: screen motion from
+    /// translation is proportional to 1/depth, so this is the typical motion factor.
+    double mean_inverse_depth = 0;
+    double max_extent_px = 0;   ///< largest cached footprint half-extent (full-screen ones excluded)
+};
+
+/// Decides key and cached frames for one stream.
+class FramePlanner {
+public:
+    struct Plan {
+        bool key = true;
+        std::vector<Camera> poses;  ///< key frame: the actual pose first, then the speculated ones
+        int window = 1;
+    };
+
+    Plan next(const Camera& actual, const CatgsOptions& options, const FrameHints* hints = nullptr);
+    /// Called by the backend after rendering a key frame of `plan`.
+    void key_rendered(const Plan& plan, const KeyFrameSummary& summary);
+    void reset();
+    int window() const;
+
+private:
+    std::deque<Camera> history_;  // recent actual cameras, newest last
+    std::optional<WindowController> controller_;
+    std::vector<Camera> envelope_;  // speculated poses of the current cache
+    KeyFrameSummary summary_;
+    int frames_in_window_ = 0;
+    int window_ = 1;
+};
+
+/// Extrapolates `count` poses after the newest camera of `history` at constant linear and
+/// angular velocity, spaced by the history's last frame interval.
+std::vector<Camera> predict_poses(const std::deque<Camera>& history, int count);
+
+const char* cache_mode_name(CacheMode mode);
+/// "off", "speculative", "unspeculated"; throws catgs::Error otherwise.
+CacheMode parse_cache_mode(const std::string& name);
+
+}  // namespace catgs
