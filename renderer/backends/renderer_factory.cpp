@@ -13,11 +13,16 @@ template <typename T>
 class CpuBackend final : public Renderer {
 public:
     explicit CpuBackend(int threads) : renderer_(threads) {}
-    void set_scene(std::shared_ptr<const Scene> scene) override { scene_ = std::move(scene); }
-    FrameStats render(const Camera& camera, const RenderOptions& options, ImageF& out) override {
-        if (!scene_) throw Error("cpu renderer: no scene set");
-        return renderer_.render(*scene_, camera, options, out);
+    void set_scene(std::shared_ptr<const Scene> scene) override {
+        scene_ = std::move(scene);
+        renderer_.reset_cache();
     }
+    FrameStats render(const Camera& camera, const RenderOptions& options, ImageF& out,
+                      const FrameHints* hints) override {
+        if (!scene_) throw Error("cpu renderer: no scene set");
+        return renderer_.render(*scene_, camera, options, out, hints);
+    }
+    void reset_cache() override { renderer_.reset_cache(); }
     std::string name() const override { return sizeof(T) == 4 ? "cpu/float" : "cpu/double"; }
 
 private:
@@ -32,12 +37,15 @@ public:
     void set_scene(std::shared_ptr<const Scene> scene) override {
         renderer_.set_scene(std::make_shared<cuda::DeviceScene>(*scene, renderer_.stream()));
     }
-    FrameStats render(const Camera& camera, const RenderOptions& options, ImageF& out) override {
-        return renderer_.render(camera, options, nullptr, &out);
+    FrameStats render(const Camera& camera, const RenderOptions& options, ImageF& out,
+                      const FrameHints* hints) override {
+        return renderer_.render(camera, options, nullptr, &out, hints);
     }
-    FrameStats render_rgb8(const Camera& camera, const RenderOptions& options, ImageRGB8& out) override {
-        return renderer_.render(camera, options, &out, nullptr);
+    FrameStats render_rgb8(const Camera& camera, const RenderOptions& options, ImageRGB8& out,
+                           const FrameHints* hints) override {
+        return renderer_.render(camera, options, &out, nullptr, hints);
     }
+    void reset_cache() override { renderer_.reset_cache(); }
     std::string name() const override { return sizeof(T) == 4 ? "cuda/float" : "cuda/double"; }
 
 private:
@@ -47,9 +55,10 @@ private:
 
 }  // namespace
 
-FrameStats Renderer::render_rgb8(const Camera& camera, const RenderOptions& options, ImageRGB8& out) {
+FrameStats Renderer::render_rgb8(const Camera& camera, const RenderOptions& options, ImageRGB8& out,
+                                 const FrameHints* hints) {
     ImageF image;
-    FrameStats stats = render(camera, options, image);
+    FrameStats stats = render(camera, options, image, hints);
     out = to_rgb8(image);
     return stats;
 }

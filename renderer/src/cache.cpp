@@ -203,6 +203,11 @@ void FramePlanner::key_rendered(const Plan& plan, const KeyFrameSummary& summary
     frames_in_window_ = 1;
 }
 
+void FramePlanner::invalidate() {
+    envelope_.clear();
+    frames_in_window_ = 0;
+}
+
 void FramePlanner::reset() {
     history_.clear();
     controller_.reset();

@@ -14,6 +14,7 @@
 #include "catgs/scene_io.hpp"
 #include "catgs/scene_ops.hpp"
 #include "catgs/trajectory.hpp"
+#include "cli_options.hpp"
 
 namespace {
 
@@ -27,7 +28,7 @@ struct Options {
     std::string trajectory = "builtin:survey?altitude=80&pitch=-45&speed=8&fps=30&frames=300";
     std::string backend = "cuda";
     std::string precision = "float";
-    std::string culling = "opacity-aware";
+    catgs::cli::PipelineFlags pipeline;
     std::string json_out;
     int width = 1920, height = 1080;
     double fov = 70.0;
@@ -53,7 +54,7 @@ struct Series {
 
 int run(const Options& o) {
     catgs::RenderOptions render_options;
-    render_options.culling = catgs::parse_culling(o.culling);
+    catgs::cli::apply_pipeline_flags(o.pipeline, render_options);
     const catgs::Precision precision = catgs::parse_precision(o.precision);
     const auto [grid_x, grid_y] = catgs::parse_grid(o.grid);
     const int up_axis = catgs::parse_up_axis(o.up);
@@ -73,29 +74,39 @@ int run(const Options& o) {
 
     auto renderer = catgs::make_renderer(o.backend, precision, o.threads);
     renderer->set_scene(scene);
-    std::printf("scene: %s\nrenderer: %s, culling %s, %dx%d, %zu frames, %d warm-up renders\n",
-                catgs::describe(*scene).c_str(), renderer->name().c_str(), catgs::culling_name(render_options.culling),
-                cameras[0].intrinsics.width, cameras[0].intrinsics.height, cameras.size(), o.warmup);
+    std::printf("scene: %s\nrenderer: %s, %s, %dx%d, %zu frames, %d warm-up renders\n",
+                catgs::describe(*scene).c_str(), renderer->name().c_str(),
+                catgs::cli::describe_pipeline(render_options).c_str(), cameras[0].intrinsics.width,
+                cameras[0].intrinsics.height, cameras.size(), o.warmup);
     std::fflush(stdout);
 
+    // Warm-up renders of the first camera, then a fresh cache so the timed path starts cold.
     catgs::ImageRGB8 image;
     for (int i = 0; i < o.warmup; ++i) renderer->render_rgb8(cameras[0], render_options, image);
+    renderer->reset_cache();
 
-    const char* stage_names[] = {"preprocess", "scan", "emit", "sort", "ranges", "rasterize", "copy", "total"};
-    std::vector<Series> stages(8);
-    Series pairs, visible, arena;
+    constexpr int kStages = 10;
+    const char* stage_names[kStages] = {"preprocess", "scan",      "emit",  "sort", "ranges",
+                                        "split",      "rasterize", "merge", "copy", "total"};
+    std::vector<Series> stages(kStages);
+    Series pairs, visible, arena, key_total, cached_total, window, splits;
     nlohmann::json frames = nlohmann::json::array();
     for (std::size_t f = 0; f < cameras.size(); ++f) {
         const catgs::FrameStats s = renderer->render_rgb8(cameras[f], render_options, image);
-        const double values[] = {s.preprocess_ms, s.scan_ms, s.keys_ms, s.sort_ms, s.ranges_ms, s.rasterize_ms,
-                                 s.copy_ms, s.total_ms};
-        for (int k = 0; k < 8; ++k) stages[k].values.push_back(values[k]);
+        const double values[kStages] = {s.preprocess_ms, s.scan_ms,      s.keys_ms,  s.sort_ms, s.ranges_ms,
+                                        s.split_ms,      s.rasterize_ms, s.merge_ms, s.copy_ms, s.total_ms};
+        for (int k = 0; k < kStages; ++k) stages[k].values.push_back(values[k]);
         pairs.values.push_back(static_cast<double>(s.pairs));
         visible.values.push_back(static_cast<double>(s.visible));
         arena.values.push_back(static_cast<double>(s.arena_bytes));
-        nlohmann::json frame{{"frame", f}, {"pairs", s.pairs}, {"visible", s.visible}, {"arena_bytes", s.arena_bytes},
-                             {"bands", s.bands}};
-        for (int k = 0; k < 8; ++k) frame[std::string(stage_names[k]) + "_ms"] = values[k];
+        window.values.push_back(s.window);
+        splits.values.push_back(static_cast<double>(s.split_tasks));
+        (s.key_frame ? key_total : cached_total).values.push_back(s.total_ms);
+        nlohmann::json frame{{"frame", f},           {"key_frame", s.key_frame}, {"window", s.window},
+                             {"pairs", s.pairs},     {"visible", s.visible},     {"arena_bytes", s.arena_bytes},
+                             {"bands", s.bands},     {"tasks", s.tasks},         {"split_tasks", s.split_tasks},
+                             {"split_k", s.split_k}};
+        for (int k = 0; k < kStages; ++k) frame[std::string(stage_names[k]) + "_ms"] = values[k];
         frames.push_back(frame);
         if (!o.quiet && (f + 1) % std::max<std::size_t>(1, cameras.size() / 10) == 0)
             std::fprintf(stderr, "benchmark: %zu/%zu frames\n", f + 1, cameras.size());
@@ -103,21 +114,22 @@ int run(const Options& o) {
 
     std::printf("\n%-12s %10s %10s %10s\n", "stage (ms)", "median", "p90", "max");
     nlohmann::json summary;
-    for (int k = 0; k < 8; ++k) {
-        std::printf("%-12s %10.3f %10.3f %10.3f\n", stage_names[k], stages[k].percentile(0.5), stages[k].percentile(0.9),
-                    stages[k].max());
-        summary[stage_names[k]] = {{"median_ms", stages[k].percentile(0.5)},
-                                   {"p90_ms", stages[k].percentile(0.9)},
-                                   {"max_ms", stages[k].max()}};
-    }
-    std::printf("%-12s %10.0f %10.0f %10.0f\n", "pairs", pairs.percentile(0.5), pairs.percentile(0.9), pairs.max());
-    std::printf("%-12s %10.0f %10.0f %10.0f\n", "visible", visible.percentile(0.5), visible.percentile(0.9),
-                visible.max());
-    std::printf("%-12s %10.1f %10.1f %10.1f\n", "arena MiB", arena.percentile(0.5) / 1048576.0,
-                arena.percentile(0.9) / 1048576.0, arena.max() / 1048576.0);
-    summary["pairs"] = {{"median", pairs.percentile(0.5)}, {"p90", pairs.percentile(0.9)}, {"max", pairs.max()}};
-    summary["visible"] = {{"median", visible.percentile(0.5)}, {"p90", visible.percentile(0.9)}, {"max", visible.max()}};
-    summary["peak_arena_bytes"] = arena.max();
+    auto row = [&](const char* name, const Series& series, double scale, const char* format) {
+        std::printf(format, name, series.percentile(0.5) * scale, series.percentile(0.9) * scale, series.max() * scale);
+        summary[name] = {{"median", series.percentile(0.5) * scale},
+                         {"p90", series.percentile(0.9) * scale},
+                         {"max", series.max() * scale},
+                         {"count", series.values.size()}};
+    };
+    for (int k = 0; k < kStages; ++k) row(stage_names[k], stages[k], 1.0, "%-12s %10.3f %10.3f %10.3f\n");
+    row("key total", key_total, 1.0, "%-12s %10.3f %10.3f %10.3f\n");
+    row("cached total", cached_total, 1.0, "%-12s %10.3f %10.3f %10.3f\n");
+    row("pairs", pairs, 1.0, "%-12s %10.0f %10.0f %10.0f\n");
+    row("visible", visible, 1.0, "%-12s %10.0f %10.0f %10.0f\n");
+    row("window", window, 1.0, "%-12s %10.0f %10.0f %10.0f\n");
+    row("split tasks", splits, 1.0, "%-12s %10.0f %10.0f %10.0f\n");
+    row("arena MiB", arena, 1.0 / 1048576.0, "%-12s %10.1f %10.1f %10.1f\n");
+    std::printf("key frames %zu, cached frames %zu\n", key_total.values.size(), cached_total.values.size());
 
     if (!o.json_out.empty()) {
         nlohmann::json doc{{"scene", nlohmann::json::parse(catgs::describe_json(*scene))},
@@ -125,7 +137,7 @@ int run(const Options& o) {
                            {"grid", o.grid},
                            {"trajectory", o.trajectory},
                            {"renderer", renderer->name()},
-                           {"culling", catgs::culling_name(render_options.culling)},
+                           {"pipeline", catgs::cli::describe_pipeline(render_options)},
                            {"width", cameras[0].intrinsics.width},
                            {"height", cameras[0].intrinsics.height},
                            {"warmup", o.warmup},
@@ -151,7 +163,7 @@ int main(int argc, char** argv) {
     app.add_option("--backend", o.backend, "cpu or cuda (" + catgs::available_backends() + " built in)")
         ->capture_default_str();
     app.add_option("--precision", o.precision, "float or double")->capture_default_str();
-    app.add_option("--culling", o.culling, "exact, bbox3sigma or opacity-aware")->capture_default_str();
+    catgs::cli::add_pipeline_flags(app, o.pipeline);
     app.add_option("--width", o.width, "image width")->capture_default_str();
     app.add_option("--height", o.height, "image height")->capture_default_str();
     app.add_option("--fov", o.fov, "horizontal field of view in degrees")->capture_default_str();

@@ -14,6 +14,7 @@
 #include "catgs/renderer.hpp"
 #include "catgs/scene_io.hpp"
 #include "catgs/trajectory.hpp"
+#include "cli_options.hpp"
 #include "image_file.hpp"
 
 namespace {
@@ -29,7 +30,7 @@ struct Options {
     std::string format = "png";
     std::string backend = "cpu";
     std::string precision = "float";
-    std::string culling = "opacity-aware";
+    catgs::cli::PipelineFlags pipeline;
     std::string background = "0,0,0";
     int width = 960, height = 540;
     double fov = 70.0;
@@ -86,10 +87,9 @@ double percentile(std::vector<double> values, double p) {
 }
 
 int run(const Options& o) {
-    const catgs::Culling culling = catgs::parse_culling(o.culling);
     const catgs::Precision precision = catgs::parse_precision(o.precision);
     catgs::RenderOptions render_options;
-    render_options.culling = culling;
+    catgs::cli::apply_pipeline_flags(o.pipeline, render_options);
     render_options.background = parse_background(o.background);
     render_options.near_plane = o.near_plane;
     if (!(o.near_plane > 0)) throw catgs::Error("--near must be positive");
@@ -135,8 +135,8 @@ int run(const Options& o) {
     auto renderer = catgs::make_renderer(o.backend, precision, o.threads);
     renderer->set_scene(scene);
     if (!o.json)
-        std::cout << "scene: " << catgs::describe(*scene) << "\nrenderer: " << renderer->name()
-                  << ", culling " << catgs::culling_name(culling) << ", " << cameras.size() << " frames\n";
+        std::cout << "scene: " << catgs::describe(*scene) << "\nrenderer: " << renderer->name() << ", "
+                  << catgs::cli::describe_pipeline(render_options) << ", " << cameras.size() << " frames\n";
 
     nlohmann::json frames = nlohmann::json::array();
     std::vector<double> totals;
@@ -158,13 +158,16 @@ int run(const Options& o) {
         if (o.json) {
             frames.push_back({{"frame", i}, {"file", file}, {"total_ms", s.total_ms},
                               {"preprocess_ms", s.preprocess_ms}, {"keys_ms", s.keys_ms}, {"sort_ms", s.sort_ms},
-                              {"ranges_ms", s.ranges_ms}, {"rasterize_ms", s.rasterize_ms}, {"visible", s.visible},
-                              {"pairs", s.pairs}});
+                              {"ranges_ms", s.ranges_ms}, {"split_ms", s.split_ms}, {"rasterize_ms", s.rasterize_ms},
+                              {"merge_ms", s.merge_ms}, {"visible", s.visible}, {"pairs", s.pairs},
+                              {"key_frame", s.key_frame}, {"window", s.window}, {"split_tasks", s.split_tasks}});
         } else {
-            std::printf("frame %5zu  %8.2f ms  (preprocess %.2f, keys %.2f, sort %.2f, ranges %.2f, rasterize %.2f)"
-                        "  visible %llu  pairs %llu\n",
-                        i, s.total_ms, s.preprocess_ms, s.keys_ms, s.sort_ms, s.ranges_ms, s.rasterize_ms,
-                        static_cast<unsigned long long>(s.visible), static_cast<unsigned long long>(s.pairs));
+            std::printf("frame %5zu %s W=%-2d %8.2f ms  (preprocess %.2f, keys %.2f, sort %.2f, ranges %.2f, "
+                        "split %.2f, rasterize %.2f, merge %.2f)  visible %llu  pairs %llu  splits %llu\n",
+                        i, s.key_frame ? "key   " : "cached", s.window, s.total_ms, s.preprocess_ms, s.keys_ms,
+                        s.sort_ms, s.ranges_ms, s.split_ms, s.rasterize_ms, s.merge_ms,
+                        static_cast<unsigned long long>(s.visible), static_cast<unsigned long long>(s.pairs),
+                        static_cast<unsigned long long>(s.split_tasks));
             std::fflush(stdout);
         }
     }
@@ -173,7 +176,7 @@ int run(const Options& o) {
     if (o.json) {
         nlohmann::json summary{{"scene", nlohmann::json::parse(catgs::describe_json(*scene))},
                                {"renderer", renderer->name()},
-                               {"culling", catgs::culling_name(culling)},
+                               {"pipeline", catgs::cli::describe_pipeline(render_options)},
                                {"width", cameras[0].intrinsics.width},
                                {"height", cameras[0].intrinsics.height},
                                {"frames", frames},
@@ -204,7 +207,7 @@ int main(int argc, char** argv) {
     app.add_option("--format", o.format, "png (8-bit) or exr (float, unclamped)")->capture_default_str();
     app.add_option("--backend", o.backend, "cpu or cuda (" + catgs::available_backends() + " built in)")->capture_default_str();
     app.add_option("--precision", o.precision, "float or double")->capture_default_str();
-    app.add_option("--culling", o.culling, "exact, bbox3sigma or opacity-aware")->capture_default_str();
+    catgs::cli::add_pipeline_flags(app, o.pipeline);
     app.add_option("--background", o.background, "background colour r,g,b in [0,1]")->capture_default_str();
     app.add_option("--width", o.width, "image width for trajectories")->capture_default_str();
     app.add_option("--height", o.height, "image height for trajectories")->capture_default_str();

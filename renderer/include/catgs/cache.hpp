@@ -117,6 +117,8 @@ public:
     Plan next(const Camera& actual, const CatgsOptions& options, const FrameHints* hints = nullptr);
     /// Called by the backend after rendering a key frame of `plan`.
     void key_rendered(const Plan& plan, const KeyFrameSummary& summary);
+    /// The last frame could not be cached (e.g. rendered in bands): the next is a key frame.
+    void invalidate();
     void reset();
     int window() const;
 

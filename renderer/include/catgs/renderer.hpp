@@ -23,9 +23,14 @@ public:
     virtual ~Renderer() = default;
     /// Makes `scene` the one rendered by the following frames (the GPU backend uploads it).
     virtual void set_scene(std::shared_ptr<const Scene> scene) = 0;
-    virtual FrameStats render(const Camera& camera, const RenderOptions& options, ImageF& out) = 0;
+    /// `hints` (optional) carry the client's flight plan or velocity for the CaT-GS cache.
+    virtual FrameStats render(const Camera& camera, const RenderOptions& options, ImageF& out,
+                              const FrameHints* hints = nullptr) = 0;
     /// 8-bit output; the GPU backend quantises on the device and copies a quarter of the bytes.
-    virtual FrameStats render_rgb8(const Camera& camera, const RenderOptions& options, ImageRGB8& out);
+    virtual FrameStats render_rgb8(const Camera& camera, const RenderOptions& options, ImageRGB8& out,
+                                   const FrameHints* hints = nullptr);
+    /// Forgets the inter-frame cache and pose history (a new stream on the same renderer).
+    virtual void reset_cache() = 0;
     virtual std::string name() const = 0;
 };
 

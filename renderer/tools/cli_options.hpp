@@ -1,0 +1,103 @@
+// Command-line flags shared by catgs-render and catgs-bench: the pipeline options, parsed the
+// same way in both, so a configuration benchmarked is one that can be rendered.
+#pragma once
+
+#include <CLI/CLI.hpp>
+
+#include <string>
+
+#include "catgs/cache.hpp"
+#include "catgs/error.hpp"
+#include "catgs/render_options.hpp"
+
+namespace catgs::cli {
+
+struct PipelineFlags {
+    std::string culling = "opacity-aware";
+    std::string split = "off";
+    double split_tail = kMinTransmittance;
+    std::string cache = "off";
+    std::string window = "adaptive";
+    int window_start = 4;
+    double guard_px = CatgsOptions{}.guard_px;
+    double guard_m = CatgsOptions{}.guard_translation;
+    std::string resort = "on";
+};
+
+inline void add_pipeline_flags(CLI::App& app, PipelineFlags& f) {
+    app.add_option("--culling", f.culling, "exact, bbox3sigma or opacity-aware")->capture_default_str();
+    app.add_option("--split", f.split, "tile task splitting: off, auto, or k (lists longer than k are split)")
+        ->capture_default_str();
+    app.add_option("--split-tail", f.split_tail,
+                   "early-termination transmittance of split sub-tasks after the first (1e-4 = exact)")
+        ->capture_default_str();
+    app.add_option("--cache", f.cache,
+                   "inter-frame cache: off, speculative (CaT-GS), or unspeculated (shows the artifacts)")
+        ->capture_default_str();
+    app.add_option("--window", f.window, "speculation window W: adaptive, or a fixed 1..16")->capture_default_str();
+    app.add_option("--window-start", f.window_start, "initial W of the adaptive window")->capture_default_str();
+    app.add_option("--guard-px", f.guard_px, "cache guard band: footprint dilation and envelope radius, pixels")
+        ->capture_default_str();
+    app.add_option("--guard-m", f.guard_m, "cache envelope radius in metres")->capture_default_str();
+    app.add_option("--resort", f.resort, "re-sort cached lists by the current depth: on or off")->capture_default_str();
+}
+
+/// Applies the flags to `options`; throws catgs::Error naming the flag and value.
+inline void apply_pipeline_flags(const PipelineFlags& f, RenderOptions& options) {
+    options.culling = parse_culling(f.culling);
+    CatgsOptions& c = options.catgs;
+    if (f.split == "off") {
+        c.split_k = 0;
+    } else if (f.split == "auto") {
+        c.split_auto = true;
+    } else {
+        try {
+            std::size_t used = 0;
+            const long k = std::stol(f.split, &used);
+            if (used != f.split.size() || k < 1 || k > (1 << 24)) throw std::invalid_argument(f.split);
+            c.split_k = static_cast<std::uint32_t>(k);
+        } catch (const std::logic_error&) {
+            throw Error("--split '" + f.split + "': expected off, auto or an integer k in 1..16777216");
+        }
+    }
+    if (!(f.split_tail >= kMinTransmittance && f.split_tail < 1.0))
+        throw Error("--split-tail " + std::to_string(f.split_tail) + ": expected a transmittance in [1e-4, 1)");
+    c.split_tail_transmittance = f.split_tail;
+    c.cache = parse_cache_mode(f.cache);
+    if (f.window == "adaptive") {
+        c.adaptive_window = true;
+        c.window = f.window_start;
+    } else {
+        try {
+            std::size_t used = 0;
+            const int w = std::stoi(f.window, &used);
+            if (used != f.window.size() || w < 1 || w > kMaxWindow) throw std::invalid_argument(f.window);
+            c.adaptive_window = false;
+            c.window = w;
+        } catch (const std::logic_error&) {
+            throw Error("--window '" + f.window + "': expected adaptive or an integer in 1..16");
+        }
+    }
+    if (f.window_start < 1 || f.window_start > kMaxWindow)
+        throw Error("--window-start " + std::to_string(f.window_start) + ": expected 1..16");
+    if (!(f.guard_px >= 0 && f.guard_px <= 64)) throw Error("--guard-px: expected 0..64 pixels");
+    if (!(f.guard_m >= 0 && f.guard_m <= 100)) throw Error("--guard-m: expected 0..100 metres");
+    c.guard_px = f.guard_px;
+    c.guard_translation = f.guard_m;
+    if (f.resort != "on" && f.resort != "off") throw Error("--resort '" + f.resort + "': expected on or off");
+    c.resort_cached = f.resort == "on";
+}
+
+/// A short description of the pipeline options for logs and benchmark tables.
+inline std::string describe_pipeline(const RenderOptions& o) {
+    std::string s = culling_name(o.culling);
+    const CatgsOptions& c = o.catgs;
+    s += c.split_auto ? ", split auto" : (c.split_k ? ", split k=" + std::to_string(c.split_k) : ", no split");
+    s += std::string(", cache ") + cache_mode_name(c.cache);
+    if (c.cache != CacheMode::off)
+        s += c.adaptive_window ? ", W adaptive" : ", W=" + std::to_string(c.window);
+    if (c.cache != CacheMode::off && !c.resort_cached) s += ", depth order reused";
+    return s;
+}
+
+}  // namespace catgs::cli
