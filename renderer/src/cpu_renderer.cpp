@@ -80,6 +80,12 @@ FrameStats CpuRenderer<T>::render(const Scene& scene, const Camera& camera, cons
         stats.preprocess_ms = elapsed_ms(t);
         t = Clock::now();
         emit_keys(scene, window, options.culling);
+        if (options.catgs.cache != CacheMode::off) {
+            // Cached frames re-key from the pairs in emission (Gaussian) order, so that their
+            // stable sort orders equal depths by index, exactly as a full render does.
+            emitted_keys_ = keys_;
+            emitted_values_ = values_;
+        }
         stats.keys_ms = elapsed_ms(t);
         t = Clock::now();
         sort_pairs(view);
@@ -96,11 +102,17 @@ FrameStats CpuRenderer<T>::render(const Scene& scene, const Camera& camera, cons
         stats.preprocess_ms = elapsed_ms(t);
         if (options.catgs.resort_cached) {
             t = Clock::now();
-            rekey_pairs();
+            rekey_pairs(view, options.culling);
             stats.keys_ms = elapsed_ms(t);
             t = Clock::now();
             sort_pairs(view);
             stats.sort_ms = elapsed_ms(t);
+            t = Clock::now();
+            find_tile_ranges(view, options.culling);
+            stats.ranges_ms = elapsed_ms(t);
+            t = Clock::now();
+            split_k_ = build_tasks(options.catgs);
+            stats.split_ms = elapsed_ms(t);
         }
     }
     t = Clock::now();
@@ -110,7 +122,7 @@ FrameStats CpuRenderer<T>::render(const Scene& scene, const Camera& camera, cons
     merge(view, options, out);
     stats.merge_ms = elapsed_ms(t);
     stats.total_ms = elapsed_ms(start);
-    stats.pairs = keys_.size();
+    stats.pairs = rendered_pairs_;
     stats.tasks = tasks_.size();
     stats.split_tasks = tasks_.size() - ranges_.size();
     stats.split_k = split_k_;
@@ -126,7 +138,7 @@ std::uint32_t CpuRenderer<T>::project_window(const Scene& scene, std::size_t i, 
                         &scene.sh[sh_stride * i], scene.sh_degree};
     std::uint32_t valid = 0;
     for (std::size_t k = 0; k < window.views.size(); ++k)
-        if (project_gaussian(g, window.views[k], poses[k])) valid |= 1u << k;
+        if (project_geometry(g, window.views[k], poses[k])) valid |= 1u << k;
     return valid;
 }
 
@@ -156,9 +168,19 @@ void CpuRenderer<T>::preprocess(const Scene& scene, const View<T>& actual, const
             sort_depth_[i] = static_cast<float>(poses[first_valid_pose(valid)].depth);
             for (int k = 0; k < w; ++k)
                 if (valid >> k & 1u) chunk_min = std::min(chunk_min, static_cast<double>(poses[k].depth));
+            // At the actual pose: pose 0's geometry unless the window lowered the near plane;
+            // the SH colour only now that the Gaussian is known to touch a tile.
             const GaussianRef g{&scene.positions[3 * i], &scene.scales[3 * i], &scene.rotations[4 * i],
                                 scene.opacities[i], &scene.sh[sh_stride * i], scene.sh_degree};
-            if (!project_gaussian(g, actual, projected_[i])) projected_[i].opacity = T(0);
+            bool at_actual = (valid & 1u) != 0;
+            if (window.near_plane != actual.near_plane)
+                at_actual = project_geometry(g, actual, projected_[i]);
+            else
+                projected_[i] = poses[0];
+            if (at_actual)
+                shade_gaussian(g, actual, projected_[i]);
+            else
+                projected_[i].opacity = T(0);
         }
         std::lock_guard lock(min_mutex);
         window_min_depth_ = std::min(window_min_depth_, chunk_min);
@@ -211,15 +233,24 @@ void CpuRenderer<T>::emit_keys(const Scene& scene, const Window& window, Culling
     });
 }
 
-// Cached frame, re-sort: the cached pairs keep their tiles and take the current depth of
-// their Gaussian, so a stable sort restores exact depth order within every tile. Gaussians
-// culled at this pose keep their old key (they are skipped by opacity 0 anyway).
+// Cached frame, re-sort: every pair the key frame emitted keeps its tile if the Gaussian's
+// footprint at the current pose still touches it (the single-frame predicate), with the
+// Gaussian's current depth; the others, and Gaussians culled at this pose, are parked past
+// the grid (they sort last and no range covers them). Re-keying from the emission order
+// makes the stable sort order equal depths by Gaussian index. The lists become exactly the
+// per-frame lists, in exact depth order, without preprocessing the scene again.
 template <typename T>
-void CpuRenderer<T>::rekey_pairs() {
+void CpuRenderer<T>::rekey_pairs(const View<T>& view, Culling culling) {
+    const std::uint32_t tiles = static_cast<std::uint32_t>(view.tiles_x) * view.tiles_y;
+    keys_.resize(emitted_keys_.size());
+    values_ = emitted_values_;
     parallel_for(keys_.size(), kGaussianGrain * 16, threads_, [&](std::size_t begin, std::size_t end) {
         for (std::size_t j = begin; j < end; ++j) {
             const Projected<T>& p = projected_[values_[j]];
-            if (p.opacity > 0) keys_[j] = make_sort_key(key_tile(keys_[j]), static_cast<float>(p.depth));
+            const std::uint32_t tile = key_tile(emitted_keys_[j]);
+            // Exact culling shares one list among all tiles: nothing to filter.
+            const bool keep = culling == Culling::exact || (p.opacity > 0 && touches_tile(p, culling, view, tile));
+            keys_[j] = make_sort_key(keep ? tile : parked_tile(tiles), static_cast<float>(p.depth));
         }
     });
 }
@@ -262,13 +293,19 @@ void CpuRenderer<T>::find_tile_ranges(const View<T>& view, Culling culling) {
     ranges_.assign(tiles, TileRange{});
     const std::size_t n = keys_.size();
     if (culling == Culling::exact) {
-        for (auto& r : ranges_) r = {0, n};
+        std::size_t kept = 0;  // cached frames park unneeded pairs past the grid, at the end
+        while (kept < n && key_tile(keys_[kept]) < tiles) ++kept;
+        for (auto& r : ranges_) r = {0, kept};
+        rendered_pairs_ = kept;
         return;
     }
+    rendered_pairs_ = 0;
     for (std::size_t i = 0; i < n; ++i) {
         const std::uint32_t tile = key_tile(keys_[i]);
+        if (tile >= tiles) continue;  // parked by rekey_pairs
         if (i == 0 || key_tile(keys_[i - 1]) != tile) ranges_[tile].begin = i;
         if (i + 1 == n || key_tile(keys_[i + 1]) != tile) ranges_[tile].end = i + 1;
+        ++rendered_pairs_;
     }
 }
 

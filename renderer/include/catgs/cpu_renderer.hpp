@@ -65,7 +65,7 @@ private:
     void reproject(const Scene& scene, const View<T>& actual);
     void emit_keys(const Scene& scene, const Window& window, Culling culling);
     void sort_pairs(const View<T>& view);
-    void rekey_pairs();
+    void rekey_pairs(const View<T>& view, Culling culling);
     void find_tile_ranges(const View<T>& view, Culling culling);
     std::uint32_t build_tasks(const CatgsOptions& options);
     void rasterize(const View<T>& view, const RenderOptions& options, ImageF& out);
@@ -79,13 +79,16 @@ private:
     int threads_;
     FramePlanner planner_;
     std::uint32_t split_k_ = 0;                   // k of the current task list
-    double window_min_depth_ = 0;                 // preprocess: nearest depth at any pose of the window
+    double window_min_depth_ = 0;
+    std::uint64_t rendered_pairs_ = 0;            // ranges: pairs the tiles' lists hold                 // preprocess: nearest depth at any pose of the window
     std::vector<Projected<T>> projected_;         // preprocess: at the actual pose; opacity 0 = culled
     std::vector<std::uint32_t> tiles_touched_;    // preprocess: union tile count, 0 = not cached
     std::vector<float> sort_depth_;               // preprocess: depth the keys sort by
     std::vector<std::uint64_t> offsets_;          // keys: exclusive scan of tiles_touched_
     std::vector<std::uint64_t> keys_;             // keys, then sorted
     std::vector<std::uint32_t> values_;           // Gaussian index per key
+    std::vector<std::uint64_t> emitted_keys_;     // keys: a key frame's pairs in emission order (cache)
+    std::vector<std::uint32_t> emitted_values_;
     std::vector<std::uint64_t> sort_keys_tmp_;    // sort: ping-pong buffers
     std::vector<std::uint32_t> sort_values_tmp_;
     std::vector<TileRange> ranges_;               // tile ranges

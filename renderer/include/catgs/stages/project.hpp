@@ -44,10 +44,12 @@ CATGS_HD Mat3<T> covariance_3d(const float* scale, const float* rotation) {
     return m * transpose(m);
 }
 
-/// Projects one Gaussian. Returns false (culled) when it is at or behind the near plane, or
-/// when its 2D covariance is degenerate or not finite; `out` is then unspecified.
+/// Projects one Gaussian's geometry: mean, 2D covariance, conic, depth, opacity (not its
+/// colour). Returns false (culled) when it is at or behind the near plane, or when its 2D
+/// covariance is degenerate or not finite; `out` is then unspecified. Tile counting needs
+/// only this, so the SH colour is evaluated (shade_gaussian) only where a tile is touched.
 template <typename T>
-CATGS_HD bool project_gaussian(const GaussianRef& g, const View<T>& view, Projected<T>& out) {
+CATGS_HD bool project_geometry(const GaussianRef& g, const View<T>& view, Projected<T>& out) {
     const Vec3<T> p{static_cast<T>(g.position[0]), static_cast<T>(g.position[1]), static_cast<T>(g.position[2])};
     const Vec3<T> pc = view.rotation * p + view.translation;
     if (!(pc.z > view.near_plane)) return false;  // also rejects NaN
@@ -79,14 +81,25 @@ CATGS_HD bool project_gaussian(const GaussianRef& g, const View<T>& view, Projec
     out.cov = {cxx, cxy, cyy};
     out.depth = pc.z;
     out.opacity = static_cast<T>(g.opacity);
-    if (!is_finite(out.mean.x) || !is_finite(out.mean.y) || !is_finite(out.conic.x) || !is_finite(out.conic.y) ||
-        !is_finite(out.conic.z))
-        return false;
+    return is_finite(out.mean.x) && is_finite(out.mean.y) && is_finite(out.conic.x) && is_finite(out.conic.y) &&
+           is_finite(out.conic.z);
+}
 
+/// The SH colour of a Gaussian seen from the view's camera centre.
+template <typename T>
+CATGS_HD void shade_gaussian(const GaussianRef& g, const View<T>& view, Projected<T>& out) {
+    const Vec3<T> p{static_cast<T>(g.position[0]), static_cast<T>(g.position[1]), static_cast<T>(g.position[2])};
     Vec3<T> dir = p - view.centre;
     const T len = sqrt_of(dot(dir, dir));
     dir = len > T(0) ? (T(1) / len) * dir : Vec3<T>{T(0), T(0), T(1)};
     out.colour = sh_colour<T>(g.sh, g.sh_degree, dir);
+}
+
+/// Geometry and colour: everything the rasterizer needs of one Gaussian.
+template <typename T>
+CATGS_HD bool project_gaussian(const GaussianRef& g, const View<T>& view, Projected<T>& out) {
+    if (!project_geometry(g, view, out)) return false;
+    shade_gaussian(g, view, out);
     return true;
 }
 

@@ -146,6 +146,27 @@ struct TileRows {
     int end = 1 << 30;
 };
 
+/// Is tile (tx, ty) in the footprint whose tile rectangle is `rect`? The per-tile half of
+/// the predicate, also used on its own by cached frames to drop pairs the current pose no
+/// longer needs.
+template <typename T>
+CATGS_HD bool footprint_in_tile(const Projected<T>& g, Culling mode, const TileRect& rect, int tx, int ty,
+                                const View<T>& view, T guard = T(0)) {
+    return tx >= rect.x0 && tx < rect.x1 && ty >= rect.y0 && ty < rect.y1 &&
+           (mode != Culling::opacity_aware ||
+            ellipse_touches_tile(g, opacity_level(g.opacity), tx, ty, view.width, view.height, guard));
+}
+
+/// Does a single-frame footprint touch tile `tile`? Exactly the tiles for_each_touched_tile
+/// emits (exact mode: every tile).
+template <typename T>
+CATGS_HD bool touches_tile(const Projected<T>& g, Culling mode, const View<T>& view, std::uint32_t tile) {
+    if (mode == Culling::exact) return true;
+    const TileRect r = tile_rect(g, mode, view.tiles_x, view.tiles_y);
+    return footprint_in_tile(g, mode, r, static_cast<int>(tile % view.tiles_x), static_cast<int>(tile / view.tiles_x),
+                             view);
+}
+
 /// The tile predicate of count and emit. Calls emit(tile_id) for every tile in the union of
 /// the footprints of the poses whose bit is set in `valid` (projections poses[0..window)),
 /// each dilated by `guard` pixels, within `rows`; returns how many.
@@ -181,13 +202,7 @@ CATGS_HD std::uint32_t for_each_window_tile(const Projected<T>* poses, std::uint
     for (int ty = u.y0; ty < u.y1; ++ty)
         for (int tx = u.x0; tx < u.x1; ++tx) {
             bool hit = false;
-            for (int k = 0; k < window && !hit; ++k) {
-                const TileRect& r = rects[k];
-                hit = tx >= r.x0 && tx < r.x1 && ty >= r.y0 && ty < r.y1 &&
-                      (mode != Culling::opacity_aware ||
-                       ellipse_touches_tile(poses[k], opacity_level(poses[k].opacity), tx, ty, view.width, view.height,
-                                            guard));
-            }
+            for (int k = 0; k < window && !hit; ++k) hit = footprint_in_tile(poses[k], mode, rects[k], tx, ty, view, guard);
             if (!hit) continue;
             emit(static_cast<std::uint32_t>(ty * view.tiles_x + tx));
             ++n;
@@ -223,5 +238,9 @@ CATGS_INLINE std::uint64_t make_sort_key(std::uint32_t tile, float depth) {
 }
 
 CATGS_INLINE std::uint32_t key_tile(std::uint64_t key) { return static_cast<std::uint32_t>(key >> 32); }
+
+/// Cached frames park the pairs the current pose does not need at tile id `tiles`: past every
+/// real tile, so they sort last and no range covers them (bit_width(tiles) sort bits hold it).
+CATGS_INLINE std::uint32_t parked_tile(std::uint32_t tiles) { return tiles; }
 
 }  // namespace catgs
