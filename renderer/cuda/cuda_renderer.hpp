@@ -6,8 +6,14 @@
 //   emit        one thread per Gaussian writes (tile | depth) keys at its offset
 //   sort        CUB radix sort over the used key bits only (32 + bits of the tile count)
 //   ranges      per tile [begin, end) in the sorted list
-//   rasterize   one 256-thread block per 16x16 tile, batches of Gaussians in shared memory
+//   split       CaT-GS Algorithm 1: extra sub-tasks of long lists through an atomic task
+//               counter, each with a (tile, split index) label
+//   rasterize   one 256-thread block per task (16x16 tile or sub-task), batches of Gaussians
+//               in shared memory; sub-tasks write partial (R, A)
+//   merge       composites the sub-tasks of each split tile front to back
 //   copy-out    RGB8 (quantised on the device) and/or float RGB to the host
+// A key frame of the CaT-GS cache preprocesses against the window's W poses; cached frames
+// re-project the cached Gaussians, re-key and re-sort the cached pairs, and rasterize.
 //
 // When a frame's pairs exceed the pair budget, it is rendered in horizontal bands of tile
 // rows, each with its own count, emit, sort and rasterize; a single tile row over budget is
@@ -17,6 +23,7 @@
 #include <cstdint>
 #include <memory>
 
+#include "catgs/cache.hpp"
 #include "catgs/camera.hpp"
 #include "catgs/image.hpp"
 #include "catgs/render_options.hpp"
@@ -74,7 +81,13 @@ public:
     void set_limits(CudaLimits limits);
 
     /// Renders one frame; either output may be null. Stage times come from CUDA events.
-    FrameStats render(const Camera& camera, const RenderOptions& options, ImageRGB8* rgb8, ImageF* rgb_float);
+    /// With options.catgs.cache on, frames inside the window reuse the key frame's lists
+    /// (cache.hpp); `hints` may carry the client's flight plan or velocity.
+    FrameStats render(const Camera& camera, const RenderOptions& options, ImageRGB8* rgb8, ImageF* rgb_float,
+                      const FrameHints* hints = nullptr);
+
+    /// Forgets the inter-frame cache and the pose history (a new stream).
+    void reset_cache();
 
     cudaStream_t stream() const;
 
