@@ -1,13 +1,20 @@
 // catgs-bench: renders a camera path and reports per-stage times (CUDA events on the GPU),
-// tile-Gaussian pairs, visible Gaussians and arena memory per frame, with median, p90 and max.
+// tile-Gaussian pairs, visible Gaussians and arena memory per frame, with median, p90 and max;
+// key frames and cached frames apart. With --sweep it runs several pipeline configurations on
+// the same scene and path and sets their times against their error to an exact reference
+// render (PSNR, max 8-bit error, fraction of values more than one level off), for the
+// time-against-error table and plot (renderer/tools/plot_sweep.sh).
 // It links no OpenImageIO, so it runs on bare GPU hosts (see deploy/bundle.sh).
 #include <CLI/CLI.hpp>
 
 #include <algorithm>
+#include <cctype>
+#include <cmath>
 #include <cstdio>
 #include <fstream>
 #include <iostream>
 #include <nlohmann/json.hpp>
+#include <sstream>
 
 #include "catgs/error.hpp"
 #include "catgs/renderer.hpp"
@@ -20,6 +27,8 @@ namespace {
 
 constexpr int kExitBadInput = 2;
 constexpr int kExitFailure = 1;
+/// PSNR of identical images is infinite; tables and plots cap it here.
+constexpr double kPsnrCap = 100.0;
 
 struct Options {
     std::string scene = "builtin:city?gaussians=1000000&seed=1";
@@ -29,7 +38,11 @@ struct Options {
     std::string backend = "cuda";
     std::string precision = "float";
     catgs::cli::PipelineFlags pipeline;
-    std::string json_out;
+    std::string sweep;
+    std::string reference = "none";
+    std::string reference_backend;
+    int error_every = 10;
+    std::string json_out, csv_out;
     int width = 1920, height = 1080;
     double fov = 70.0;
     int warmup = 5;
@@ -50,21 +63,155 @@ struct Series {
         return v[lo] + (rank - static_cast<double>(lo)) * (v[hi] - v[lo]);
     }
     double max() const { return values.empty() ? 0 : *std::max_element(values.begin(), values.end()); }
+    double min() const { return values.empty() ? 0 : *std::min_element(values.begin(), values.end()); }
+    double mean() const {
+        double s = 0;
+        for (double v : values) s += v;
+        return values.empty() ? 0 : s / static_cast<double>(values.size());
+    }
 };
 
+struct Config {
+    std::string name;
+    catgs::RenderOptions options;
+};
+
+constexpr int kStages = 10;
+const char* const kStageNames[kStages] = {"preprocess", "scan", "emit", "sort", "ranges",
+                                          "split", "rasterize", "merge", "copy", "total"};
+
+struct Result {
+    std::string name, pipeline;
+    std::vector<Series> stages = std::vector<Series>(kStages);
+    Series pairs, visible, arena, key_total, cached_total, window, splits, psnr, max_abs, over_one;
+    nlohmann::json frames = nlohmann::json::array();
+};
+
+/// Parses "name: flags; name: flags" (or one "name: flags" per line of @file) into configs.
+std::vector<Config> parse_sweep(std::string text) {
+    if (!text.empty() && text[0] == '@') {
+        std::ifstream in(text.substr(1));
+        if (!in) throw catgs::Error("--sweep '" + text + "': cannot open the file");
+        std::stringstream all;
+        all << in.rdbuf();
+        text = all.str();
+        std::replace(text.begin(), text.end(), '\n', ';');
+    }
+    std::vector<Config> configs;
+    std::stringstream in(text);
+    std::string entry;
+    while (std::getline(in, entry, ';')) {
+        const auto first = entry.find_first_not_of(" \t\r\n");
+        if (first == std::string::npos || entry[first] == '#') continue;
+        const auto colon = entry.find(':');
+        if (colon == std::string::npos)
+            throw catgs::Error("--sweep entry '" + entry + "': expected 'name: flags'");
+        Config c;
+        c.name = entry.substr(first, colon - first);
+        while (!c.name.empty() && std::isspace(static_cast<unsigned char>(c.name.back()))) c.name.pop_back();
+        CLI::App app;
+        catgs::cli::PipelineFlags flags;
+        catgs::cli::add_pipeline_flags(app, flags);
+        try {
+            app.parse(entry.substr(colon + 1), false);
+        } catch (const CLI::ParseError& e) {
+            throw catgs::Error("--sweep entry '" + c.name + "': " + e.what());
+        }
+        catgs::cli::apply_pipeline_flags(flags, c.options);
+        configs.push_back(c);
+    }
+    if (configs.empty()) throw catgs::Error("--sweep '" + text + "': no configurations");
+    return configs;
+}
+
+Result run_config(catgs::Renderer& renderer, const std::vector<catgs::Camera>& cameras, const Config& config,
+                  const Options& o, const std::vector<catgs::ImageRGB8>& references) {
+    Result r;
+    r.name = config.name;
+    r.pipeline = catgs::cli::describe_pipeline(config.options);
+    catgs::ImageRGB8 image;
+    // Warm-up renders of the first camera, then a fresh cache so the timed path starts cold.
+    for (int i = 0; i < o.warmup; ++i) renderer.render_rgb8(cameras[0], config.options, image);
+    renderer.reset_cache();
+    for (std::size_t f = 0; f < cameras.size(); ++f) {
+        const catgs::FrameStats s = renderer.render_rgb8(cameras[f], config.options, image);
+        const double values[kStages] = {s.preprocess_ms, s.scan_ms,      s.keys_ms,  s.sort_ms, s.ranges_ms,
+                                        s.split_ms,      s.rasterize_ms, s.merge_ms, s.copy_ms, s.total_ms};
+        for (int k = 0; k < kStages; ++k) r.stages[k].values.push_back(values[k]);
+        r.pairs.values.push_back(static_cast<double>(s.pairs));
+        r.visible.values.push_back(static_cast<double>(s.visible));
+        r.arena.values.push_back(static_cast<double>(s.arena_bytes));
+        r.window.values.push_back(s.window);
+        r.splits.values.push_back(static_cast<double>(s.split_tasks));
+        (s.key_frame ? r.key_total : r.cached_total).values.push_back(s.total_ms);
+        nlohmann::json frame{{"frame", f},           {"key_frame", s.key_frame}, {"window", s.window},
+                             {"pairs", s.pairs},     {"visible", s.visible},     {"arena_bytes", s.arena_bytes},
+                             {"bands", s.bands},     {"tasks", s.tasks},         {"split_tasks", s.split_tasks},
+                             {"split_k", s.split_k}};
+        for (int k = 0; k < kStages; ++k) frame[std::string(kStageNames[k]) + "_ms"] = values[k];
+        if (!references.empty() && f % static_cast<std::size_t>(o.error_every) == 0) {
+            const catgs::ImageError e = catgs::compare(image, references[f / static_cast<std::size_t>(o.error_every)]);
+            const double psnr = std::min(e.psnr, kPsnrCap);
+            r.psnr.values.push_back(psnr);
+            r.max_abs.values.push_back(e.max_abs);
+            r.over_one.values.push_back(e.fraction_over_one);
+            frame["psnr"] = psnr;
+            frame["max_abs"] = e.max_abs;
+            frame["fraction_over_one_level"] = e.fraction_over_one;
+        }
+        r.frames.push_back(frame);
+        if (!o.quiet && (f + 1) % std::max<std::size_t>(1, cameras.size() / 5) == 0)
+            std::fprintf(stderr, "%s: %zu/%zu frames\n", config.name.c_str(), f + 1, cameras.size());
+    }
+    return r;
+}
+
+nlohmann::json stats_json(const Series& s) {
+    return {{"median", s.percentile(0.5)}, {"p90", s.percentile(0.9)}, {"max", s.max()}, {"count", s.values.size()}};
+}
+
+void print_detail(const Result& r) {
+    std::printf("\n== %s (%s)\n%-13s %10s %10s %10s\n", r.name.c_str(), r.pipeline.c_str(), "stage (ms)", "median", "p90",
+                "max");
+    auto row = [](const char* name, const Series& s, double scale, const char* format) {
+        std::printf(format, name, s.percentile(0.5) * scale, s.percentile(0.9) * scale, s.max() * scale);
+    };
+    for (int k = 0; k < kStages; ++k) row(kStageNames[k], r.stages[k], 1.0, "%-13s %10.3f %10.3f %10.3f\n");
+    row("key total", r.key_total, 1.0, "%-13s %10.3f %10.3f %10.3f\n");
+    row("cached total", r.cached_total, 1.0, "%-13s %10.3f %10.3f %10.3f\n");
+    row("pairs", r.pairs, 1.0, "%-13s %10.0f %10.0f %10.0f\n");
+    row("visible", r.visible, 1.0, "%-13s %10.0f %10.0f %10.0f\n");
+    row("window", r.window, 1.0, "%-13s %10.0f %10.0f %10.0f\n");
+    row("split tasks", r.splits, 1.0, "%-13s %10.0f %10.0f %10.0f\n");
+    row("arena MiB", r.arena, 1.0 / 1048576.0, "%-13s %10.1f %10.1f %10.1f\n");
+    std::printf("key frames %zu, cached frames %zu", r.key_total.values.size(), r.cached_total.values.size());
+    if (!r.psnr.values.empty())
+        std::printf("; error on %zu frames: PSNR mean %.2f worst %.2f dB, max %0.f levels, >1 level %.5f%%",
+                    r.psnr.values.size(), r.psnr.mean(), r.psnr.min(), r.max_abs.max(), 100.0 * r.over_one.max());
+    std::printf("\n");
+}
+
 int run(const Options& o) {
-    catgs::RenderOptions render_options;
-    catgs::cli::apply_pipeline_flags(o.pipeline, render_options);
     const catgs::Precision precision = catgs::parse_precision(o.precision);
     const auto [grid_x, grid_y] = catgs::parse_grid(o.grid);
     const int up_axis = catgs::parse_up_axis(o.up);
     if (o.warmup < 0) throw catgs::Error("--warmup must be >= 0");
+    if (o.error_every < 1) throw catgs::Error("--error-every must be >= 1");
+    if (o.reference != "none" && o.reference != "exact" && o.reference != "opacity-aware")
+        throw catgs::Error("--reference '" + o.reference + "': expected none, exact or opacity-aware");
+    std::vector<Config> configs;
+    if (o.sweep.empty()) {
+        Config c{"single", {}};
+        catgs::cli::apply_pipeline_flags(o.pipeline, c.options);
+        configs.push_back(c);
+    } else {
+        configs = parse_sweep(o.sweep);
+    }
 
     catgs::LoadOptions load;
     load.progress = catgs::stderr_progress(!o.quiet);
     auto scene = std::make_shared<catgs::Scene>(catgs::load_scene(o.scene, load));
     if (grid_x * grid_y > 1) *scene = catgs::replicate_grid(*scene, grid_x, grid_y, up_axis);
-
     const catgs::Intrinsics intrinsics = catgs::intrinsics_from_fov(o.width, o.height, o.fov);
     catgs::validate(intrinsics, "--width/--height/--fov");
     std::vector<catgs::Camera> cameras = catgs::load_trajectory(o.trajectory, scene->bounds, intrinsics);
@@ -74,78 +221,91 @@ int run(const Options& o) {
 
     auto renderer = catgs::make_renderer(o.backend, precision, o.threads);
     renderer->set_scene(scene);
-    std::printf("scene: %s\nrenderer: %s, %s, %dx%d, %zu frames, %d warm-up renders\n",
-                catgs::describe(*scene).c_str(), renderer->name().c_str(),
-                catgs::cli::describe_pipeline(render_options).c_str(), cameras[0].intrinsics.width,
-                cameras[0].intrinsics.height, cameras.size(), o.warmup);
+    std::printf("scene: %s\nrenderer: %s, %dx%d, %zu frames, %d warm-up renders, %zu configuration(s)\n",
+                catgs::describe(*scene).c_str(), renderer->name().c_str(), cameras[0].intrinsics.width,
+                cameras[0].intrinsics.height, cameras.size(), o.warmup, configs.size());
+
+    // The reference: a per-frame render in double, no cache, no split, with exact culling
+    // (every Gaussian at every pixel) or opacity-aware culling (which the tests show loses
+    // nothing relative to exact, and is affordable for large scenes), every error_every frames.
+    std::vector<catgs::ImageRGB8> references;
+    if (o.reference != "none") {
+        auto ref = catgs::make_renderer(o.reference_backend.empty() ? o.backend : o.reference_backend,
+                                        catgs::Precision::double_, o.threads);
+        ref->set_scene(scene);
+        catgs::RenderOptions ro;
+        ro.culling = catgs::parse_culling(o.reference);
+        for (std::size_t f = 0; f < cameras.size(); f += static_cast<std::size_t>(o.error_every)) {
+            references.emplace_back();
+            ref->render_rgb8(cameras[f], ro, references.back());
+            if (!o.quiet) std::fprintf(stderr, "reference (%s, %s): frame %zu\n", ref->name().c_str(), o.reference.c_str(), f);
+        }
+    }
     std::fflush(stdout);
 
-    // Warm-up renders of the first camera, then a fresh cache so the timed path starts cold.
-    catgs::ImageRGB8 image;
-    for (int i = 0; i < o.warmup; ++i) renderer->render_rgb8(cameras[0], render_options, image);
-    renderer->reset_cache();
-
-    constexpr int kStages = 10;
-    const char* stage_names[kStages] = {"preprocess", "scan",      "emit",  "sort", "ranges",
-                                        "split",      "rasterize", "merge", "copy", "total"};
-    std::vector<Series> stages(kStages);
-    Series pairs, visible, arena, key_total, cached_total, window, splits;
-    nlohmann::json frames = nlohmann::json::array();
-    for (std::size_t f = 0; f < cameras.size(); ++f) {
-        const catgs::FrameStats s = renderer->render_rgb8(cameras[f], render_options, image);
-        const double values[kStages] = {s.preprocess_ms, s.scan_ms,      s.keys_ms,  s.sort_ms, s.ranges_ms,
-                                        s.split_ms,      s.rasterize_ms, s.merge_ms, s.copy_ms, s.total_ms};
-        for (int k = 0; k < kStages; ++k) stages[k].values.push_back(values[k]);
-        pairs.values.push_back(static_cast<double>(s.pairs));
-        visible.values.push_back(static_cast<double>(s.visible));
-        arena.values.push_back(static_cast<double>(s.arena_bytes));
-        window.values.push_back(s.window);
-        splits.values.push_back(static_cast<double>(s.split_tasks));
-        (s.key_frame ? key_total : cached_total).values.push_back(s.total_ms);
-        nlohmann::json frame{{"frame", f},           {"key_frame", s.key_frame}, {"window", s.window},
-                             {"pairs", s.pairs},     {"visible", s.visible},     {"arena_bytes", s.arena_bytes},
-                             {"bands", s.bands},     {"tasks", s.tasks},         {"split_tasks", s.split_tasks},
-                             {"split_k", s.split_k}};
-        for (int k = 0; k < kStages; ++k) frame[std::string(stage_names[k]) + "_ms"] = values[k];
-        frames.push_back(frame);
-        if (!o.quiet && (f + 1) % std::max<std::size_t>(1, cameras.size() / 10) == 0)
-            std::fprintf(stderr, "benchmark: %zu/%zu frames\n", f + 1, cameras.size());
+    std::vector<Result> results;
+    for (const Config& c : configs) {
+        results.push_back(run_config(*renderer, cameras, c, o, references));
+        print_detail(results.back());
+        std::fflush(stdout);
     }
 
-    std::printf("\n%-12s %10s %10s %10s\n", "stage (ms)", "median", "p90", "max");
-    nlohmann::json summary;
-    auto row = [&](const char* name, const Series& series, double scale, const char* format) {
-        std::printf(format, name, series.percentile(0.5) * scale, series.percentile(0.9) * scale, series.max() * scale);
-        summary[name] = {{"median", series.percentile(0.5) * scale},
-                         {"p90", series.percentile(0.9) * scale},
-                         {"max", series.max() * scale},
-                         {"count", series.values.size()}};
-    };
-    for (int k = 0; k < kStages; ++k) row(stage_names[k], stages[k], 1.0, "%-12s %10.3f %10.3f %10.3f\n");
-    row("key total", key_total, 1.0, "%-12s %10.3f %10.3f %10.3f\n");
-    row("cached total", cached_total, 1.0, "%-12s %10.3f %10.3f %10.3f\n");
-    row("pairs", pairs, 1.0, "%-12s %10.0f %10.0f %10.0f\n");
-    row("visible", visible, 1.0, "%-12s %10.0f %10.0f %10.0f\n");
-    row("window", window, 1.0, "%-12s %10.0f %10.0f %10.0f\n");
-    row("split tasks", splits, 1.0, "%-12s %10.0f %10.0f %10.0f\n");
-    row("arena MiB", arena, 1.0 / 1048576.0, "%-12s %10.1f %10.1f %10.1f\n");
-    std::printf("key frames %zu, cached frames %zu\n", key_total.values.size(), cached_total.values.size());
-
+    // Summary: one row per configuration.
+    std::printf("\n%-22s %9s %9s %9s %9s %9s %10s %8s %8s %6s %5s\n", "configuration", "median", "p90", "max", "key med",
+                "cach med", "pairs med", "PSNR", "worst", "max", "W med");
+    std::ofstream csv;
+    if (!o.csv_out.empty()) {
+        csv.open(o.csv_out);
+        if (!csv) throw catgs::Error("--csv-out '" + o.csv_out + "': cannot open for writing");
+        csv << "name,pipeline,median_ms,p90_ms,max_ms,key_median_ms,cached_median_ms,key_frames,cached_frames,"
+               "pairs_median,psnr_mean,psnr_worst,max_abs,fraction_over_one_level,window_median\n";
+    }
+    nlohmann::json doc_results = nlohmann::json::array();
+    for (const Result& r : results) {
+        const Series& total = r.stages[kStages - 1];
+        std::printf("%-22s %9.3f %9.3f %9.3f %9.3f %9.3f %10.0f %8.2f %8.2f %6.0f %5.0f\n", r.name.c_str(),
+                    total.percentile(0.5), total.percentile(0.9), total.max(), r.key_total.percentile(0.5),
+                    r.cached_total.percentile(0.5), r.pairs.percentile(0.5), r.psnr.mean(), r.psnr.min(),
+                    r.max_abs.max(), r.window.percentile(0.5));
+        if (csv)
+            csv << r.name << ",\"" << r.pipeline << "\"," << total.percentile(0.5) << "," << total.percentile(0.9) << ","
+                << total.max() << "," << r.key_total.percentile(0.5) << "," << r.cached_total.percentile(0.5) << ","
+                << r.key_total.values.size() << "," << r.cached_total.values.size() << "," << r.pairs.percentile(0.5)
+                << "," << r.psnr.mean() << "," << r.psnr.min() << "," << r.max_abs.max() << "," << r.over_one.max()
+                << "," << r.window.percentile(0.5) << "\n";
+        nlohmann::json stages;
+        for (int k = 0; k < kStages; ++k) stages[kStageNames[k]] = stats_json(r.stages[k]);
+        doc_results.push_back({{"name", r.name},
+                               {"pipeline", r.pipeline},
+                               {"stages_ms", stages},
+                               {"key_total_ms", stats_json(r.key_total)},
+                               {"cached_total_ms", stats_json(r.cached_total)},
+                               {"pairs", stats_json(r.pairs)},
+                               {"visible", stats_json(r.visible)},
+                               {"window", stats_json(r.window)},
+                               {"split_tasks", stats_json(r.splits)},
+                               {"peak_arena_bytes", r.arena.max()},
+                               {"psnr_mean", r.psnr.mean()},
+                               {"psnr_worst", r.psnr.min()},
+                               {"max_abs", r.max_abs.max()},
+                               {"fraction_over_one_level", r.over_one.max()},
+                               {"frames", r.frames}});
+    }
     if (!o.json_out.empty()) {
         nlohmann::json doc{{"scene", nlohmann::json::parse(catgs::describe_json(*scene))},
                            {"scene_spec", o.scene},
                            {"grid", o.grid},
                            {"trajectory", o.trajectory},
                            {"renderer", renderer->name()},
-                           {"pipeline", catgs::cli::describe_pipeline(render_options)},
                            {"width", cameras[0].intrinsics.width},
                            {"height", cameras[0].intrinsics.height},
                            {"warmup", o.warmup},
-                           {"summary", summary},
-                           {"frames", frames}};
+                           {"reference", o.reference},
+                           {"error_every", o.error_every},
+                           {"results", doc_results}};
         std::ofstream out(o.json_out);
         if (!out) throw catgs::Error("--json-out '" + o.json_out + "': cannot open for writing");
-        out << doc.dump(2) << "\n";
+        out << doc.dump(1) << "\n";
     }
     return 0;
 }
@@ -154,7 +314,7 @@ int run(const Options& o) {
 
 int main(int argc, char** argv) {
     Options o;
-    CLI::App app{"catgs-bench: per-stage timings of a renderer along a camera path"};
+    CLI::App app{"catgs-bench: per-stage timings of a renderer along a camera path, and time against error"};
     app.add_option("--scene", o.scene, "PLY or .splat file, or builtin:city?gaussians=N&seed=S")->capture_default_str();
     app.add_option("--grid", o.grid, "replicate the scene NxM over the horizontal axes (e.g. 3x3)")->capture_default_str();
     app.add_option("--up", o.up, "the scene's up axis (x, y, z, -y, ...) for --grid")->capture_default_str();
@@ -164,6 +324,14 @@ int main(int argc, char** argv) {
         ->capture_default_str();
     app.add_option("--precision", o.precision, "float or double")->capture_default_str();
     catgs::cli::add_pipeline_flags(app, o.pipeline);
+    app.add_option("--sweep", o.sweep,
+                   "configurations to compare, 'name: flags; name: flags' or @file with one 'name: flags' a line "
+                   "(flags as --split, --cache, --window, ...); replaces the single configuration");
+    app.add_option("--reference", o.reference,
+                   "error reference, rendered in double without cache or split: none, exact, or opacity-aware")
+        ->capture_default_str();
+    app.add_option("--reference-backend", o.reference_backend, "backend for the reference (default: --backend)");
+    app.add_option("--error-every", o.error_every, "compare every Nth frame with the reference")->capture_default_str();
     app.add_option("--width", o.width, "image width")->capture_default_str();
     app.add_option("--height", o.height, "image height")->capture_default_str();
     app.add_option("--fov", o.fov, "horizontal field of view in degrees")->capture_default_str();
@@ -171,6 +339,7 @@ int main(int argc, char** argv) {
     app.add_option("--max-frames", o.max_frames, "time at most this many cameras (-1: all)")->capture_default_str();
     app.add_option("--threads", o.threads, "CPU threads for the cpu backend (0: all)")->capture_default_str();
     app.add_option("--json-out", o.json_out, "write per-frame and summary results as JSON to this file");
+    app.add_option("--csv-out", o.csv_out, "write one CSV row per configuration to this file");
     app.add_flag("--quiet", o.quiet, "no progress output on stderr");
     try {
         app.parse(argc, argv);
