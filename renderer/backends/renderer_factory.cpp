@@ -1,3 +1,6 @@
+#include <map>
+#include <mutex>
+
 #include "catgs/cpu_renderer.hpp"
 #include "catgs/error.hpp"
 #include "catgs/renderer.hpp"
@@ -31,11 +34,28 @@ private:
 };
 
 #if CATGS_HAVE_CUDA
+/// One device copy per host scene, shared by every renderer that renders it (a server's
+/// sessions): the entry lives as long as some renderer holds the device scene, and each such
+/// renderer also holds the host scene, so its address cannot be reused meanwhile.
+std::shared_ptr<const cuda::DeviceScene> shared_device_scene(const std::shared_ptr<const Scene>& scene,
+                                                             cudaStream_t stream) {
+    static std::mutex mutex;
+    static std::map<const Scene*, std::weak_ptr<const cuda::DeviceScene>> uploaded;
+    std::lock_guard lock(mutex);
+    for (auto it = uploaded.begin(); it != uploaded.end();) it = it->second.expired() ? uploaded.erase(it) : ++it;
+    if (auto found = uploaded.find(scene.get()); found != uploaded.end())
+        if (auto device = found->second.lock()) return device;
+    auto device = std::make_shared<const cuda::DeviceScene>(*scene, stream);
+    uploaded[scene.get()] = device;
+    return device;
+}
+
 template <typename T>
 class CudaBackend final : public Renderer {
 public:
     void set_scene(std::shared_ptr<const Scene> scene) override {
-        renderer_.set_scene(std::make_shared<cuda::DeviceScene>(*scene, renderer_.stream()));
+        renderer_.set_scene(shared_device_scene(scene, renderer_.stream()));
+        scene_ = std::move(scene);
     }
     FrameStats render(const Camera& camera, const RenderOptions& options, ImageF& out,
                       const FrameHints* hints) override {
@@ -50,6 +70,7 @@ public:
 
 private:
     cuda::CudaRenderer<T> renderer_;
+    std::shared_ptr<const Scene> scene_;  // keeps the shared device copy's key alive
 };
 #endif
 
