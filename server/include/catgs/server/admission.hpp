@@ -1,0 +1,80 @@
+// Admission control: how many sessions run at once, and the resolution and scene-size limits.
+// Refusals are RESOURCE_EXHAUSTED with a message naming the limit, so a client (or a load
+// balancer retry policy) can try another server.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <mutex>
+#include <string>
+
+#include <grpcpp/support/status.h>
+
+namespace catgs::server {
+
+struct Limits {
+    /// Concurrent sessions (streams and unary renders) per server, i.e. per GPU: each session
+    /// owns a renderer with its own arenas, and frame rate drops for everyone beyond a few.
+    int max_sessions = 8;
+    /// Largest image a session may ask for; 4K covers every viewer and bounds arena memory.
+    int max_width = 3840;
+    int max_height = 2160;
+    /// Host memory of all loaded scenes together (0: no limit).
+    std::uint64_t max_scene_bytes = 0;
+};
+
+class Admission {
+public:
+    explicit Admission(int max_sessions) : max_sessions_(max_sessions) {}
+
+    /// Held by an admitted session; releases its slot when destroyed.
+    class Ticket {
+    public:
+        explicit Ticket(Admission* owner) : owner_(owner) {}
+        ~Ticket() { owner_->release(); }
+        Ticket(const Ticket&) = delete;
+        Ticket& operator=(const Ticket&) = delete;
+
+    private:
+        Admission* owner_;
+    };
+
+    /// A ticket, or a status: UNAVAILABLE while draining, RESOURCE_EXHAUSTED at the limit.
+    grpc::Status admit(std::unique_ptr<Ticket>* ticket) {
+        std::lock_guard lock(mutex_);
+        if (draining_)
+            return {grpc::StatusCode::UNAVAILABLE, "server is shutting down: reconnect to another instance"};
+        if (active_ >= max_sessions_)
+            return {grpc::StatusCode::RESOURCE_EXHAUSTED,
+                    "max-sessions: the server already runs " + std::to_string(active_) + " of " +
+                        std::to_string(max_sessions_) + " sessions; retry later or on another server"};
+        ++active_;
+        ticket->reset(new Ticket(this));
+        return grpc::Status::OK;
+    }
+    /// From now on every admit() is refused with UNAVAILABLE.
+    void drain() {
+        std::lock_guard lock(mutex_);
+        draining_ = true;
+    }
+    bool draining() const {
+        std::lock_guard lock(mutex_);
+        return draining_;
+    }
+    int active() const {
+        std::lock_guard lock(mutex_);
+        return active_;
+    }
+
+private:
+    void release() {
+        std::lock_guard lock(mutex_);
+        --active_;
+    }
+    mutable std::mutex mutex_;
+    int max_sessions_;
+    int active_ = 0;
+    bool draining_ = false;
+};
+
+}  // namespace catgs::server

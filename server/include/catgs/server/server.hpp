@@ -1,0 +1,58 @@
+// The catgs render server: builds the gRPC server (RenderService, SceneService, health,
+// reflection), loads the preloaded scenes and runs the shutdown sequence. Used by the
+// catgs-server binary and, in-process, by the integration tests.
+#pragma once
+
+#include <grpcpp/grpcpp.h>
+
+#include <chrono>
+#include <memory>
+
+#include "catgs/server/server_core.hpp"
+
+namespace catgs::server {
+
+class RenderServiceImpl;
+class SceneServiceImpl;
+
+class Server {
+public:
+    explicit Server(ServerOptions options);
+    ~Server();
+
+    /// Loads the preloaded scenes and starts listening. Throws catgs::Error for bad options
+    /// (unknown backend, unreadable certificate, a port that cannot be bound, bad scene).
+    void start();
+    /// The bound ports (useful with ":0" addresses); 0 when there is no such listener.
+    int port() const { return port_; }
+    int health_port() const { return health_port_; }
+
+    /// First half of shutdown, returns at once: health turns NOT_SERVING, new sessions are
+    /// refused with UNAVAILABLE, open streams end with UNAVAILABLE asking clients to reconnect.
+    void begin_shutdown();
+    /// begin_shutdown(), then stops the gRPC server (calls still running at the deadline are
+    /// cancelled), the workers and the health listener. Returns within about `grace`.
+    void shutdown(std::chrono::milliseconds grace);
+    /// Blocks until shutdown() has completed.
+    void wait();
+
+    ServerStats stats() const { return core_->stats(); }
+    ServerCore& core() { return *core_; }
+
+private:
+    std::unique_ptr<ServerCore> core_;
+    std::unique_ptr<RenderServiceImpl> render_service_;
+    std::unique_ptr<SceneServiceImpl> scene_service_;
+    std::unique_ptr<grpc::Server> server_;
+    std::unique_ptr<grpc::Server> health_server_;
+    int port_ = 0, health_port_ = 0;
+    std::mutex mutex_;
+    std::condition_variable stopped_cv_;
+    bool shutting_down_ = false, stopped_ = false;
+};
+
+/// Message every open stream receives when the server drains.
+inline constexpr const char* kDrainMessage =
+    "server is shutting down: reconnect (to this address or another instance) and resume from your last pose";
+
+}  // namespace catgs::server

@@ -1,0 +1,124 @@
+// One RenderService.Stream call: a ServerBidiReactor that owns a renderer for its session.
+//
+// Threads: reactions (OnReadDone, OnWriteDone, OnCancel, OnDone) run on gRPC threads and only
+// move data and flags under `mutex_`; rendering runs on the render pool and encoding on the
+// encoder pool; StartWrite/Finish are called from whichever thread completes a step, never
+// while holding `mutex_` (gRPC may run a reaction inline).
+//
+// Backpressure (latest wins, bounded memory):
+// - input: one pending pose; a newer request replaces it (poses_coalesced);
+// - credits: at most max_unacked_frames frames rendered but not acknowledged by the client
+//   (FrameRequest.last_received_sequence); while over budget nothing is rendered;
+// - output: one frame in flight in gRPC plus one waiting; a newer encoded frame replaces the
+//   waiting one (frames_coalesced). Error frames queue separately, at most a few.
+#pragma once
+
+#include <grpcpp/grpcpp.h>
+
+#include <chrono>
+#include <cstdint>
+#include <deque>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <string>
+
+#include "catgs/renderer.hpp"
+#include "catgs/server/request_validation.hpp"
+#include "catgs/server/server_core.hpp"
+#include "catgs/v1/catgs.grpc.pb.h"
+
+namespace catgs::server {
+
+class StreamSession : public grpc::ServerBidiReactor<v1::StreamRequest, v1::Frame>,
+                      public std::enable_shared_from_this<StreamSession> {
+public:
+    using Clock = std::chrono::steady_clock;
+
+    StreamSession(ServerCore& core, grpc::CallbackServerContext* context);
+    ~StreamSession() override;
+
+    /// Registers the session and starts reading (or finishes at once if refused).
+    void start();
+    /// Server shutdown: drop queued work and end the stream with `status` as soon as no write
+    /// is in flight.
+    void drain(const grpc::Status& status);
+
+    void OnReadDone(bool ok) override;
+    void OnWriteDone(bool ok) override;
+    void OnCancel() override;
+    void OnDone() override;
+
+private:
+    enum class Phase { awaiting_open, opening, open };
+
+    struct PendingPose {
+        FrameSetup frame;
+        Clock::time_point received;
+    };
+
+    void handle_open(const v1::SessionConfig& config);
+    void handle_frame(const v1::FrameRequest& request);
+    void initialise();   // render pool: make the renderer
+    void render_next();  // render pool: render the newest pose
+    void deliver(v1::Frame frame, bool image);  // encoder pool or reactions: queue for writing
+
+    // The helpers below require mutex_ held. Each returns work to do after unlocking.
+    struct Actions {
+        bool schedule_render = false;
+        const v1::Frame* write = nullptr;
+        std::optional<grpc::Status> finish;
+    };
+    void plan_locked(Actions& actions);
+    void request_finish_locked(const grpc::Status& status);
+    void run(const Actions& actions);
+    void drop_unacked_locked(std::uint64_t sequence);
+    void set_buffered_locked(int frames, std::int64_t bytes);
+    void error_frame_locked(std::uint64_t sequence, const grpc::Status& status);
+
+    ServerCore& core_;
+    grpc::CallbackServerContext* context_;
+    std::shared_ptr<StreamSession> self_;  // keeps the reactor alive until OnDone
+    const std::uint64_t id_;
+    const Clock::time_point started_;
+    std::string peer_;
+
+    v1::StreamRequest request_;  // the one read in flight
+
+    std::mutex mutex_;
+    Phase phase_ = Phase::awaiting_open;
+    SessionSetup setup_;
+    std::unique_ptr<Admission::Ticket> ticket_;
+    std::unique_ptr<SceneRegistry::Lease> lease_;
+    std::unique_ptr<Renderer> renderer_;  // used by one render task at a time
+
+    std::optional<PendingPose> pending_;
+    std::uint64_t last_request_sequence_ = 0;
+    std::uint64_t last_ack_ = 0;
+    std::deque<std::uint64_t> unacked_;  // frames rendered (or rendering) and not acknowledged
+    bool reads_done_ = false;
+    bool render_busy_ = false;  // a render task is queued or running
+    int encoding_ = 0;          // frames being encoded
+
+    bool write_in_flight_ = false;
+    v1::Frame in_flight_;                 // owned by gRPC between StartWrite and OnWriteDone
+    std::optional<v1::Frame> next_image_; // latest wins
+    std::deque<v1::Frame> next_errors_;
+    std::uint64_t newest_image_sequence_ = 0;  // newest image frame queued or written
+    int buffered_frames_ = 0;
+    std::int64_t buffered_bytes_ = 0;
+
+    std::optional<grpc::Status> finish_wanted_;
+    bool finished_ = false;
+    grpc::Status final_status_;
+
+    // Session statistics (for Frame.stats and the close log line).
+    struct Counters {
+        std::uint64_t requests_received = 0, poses_coalesced = 0, frames_coalesced = 0, frames_sent = 0,
+                      frame_errors = 0;
+    };
+    Counters stats_;
+    double render_ms_sum_ = 0, encode_ms_sum_ = 0;
+};
+
+}  // namespace catgs::server

@@ -1,0 +1,142 @@
+// catgs-server: the streaming render server. Exit status: 0 after a clean shutdown, 2 on bad
+// flags or configuration (one line on stderr naming the problem), 1 on other failures.
+#include <CLI/CLI.hpp>
+#include <spdlog/sinks/stdout_color_sinks.h>
+#include <spdlog/spdlog.h>
+
+#include <csignal>
+#include <cstdio>
+#include <fstream>
+#include <iostream>
+#include <thread>
+
+#include "catgs/error.hpp"
+#include "catgs/renderer.hpp"
+#include "catgs/server/server.hpp"
+
+namespace {
+
+constexpr int kExitBadInput = 2;
+constexpr int kExitFailure = 1;
+constexpr std::uint64_t kMiB = 1024 * 1024;
+
+std::string default_backend() {
+    try {
+        catgs::make_renderer("cuda", catgs::Precision::single, 1);
+        return "cuda";
+    } catch (const std::exception&) {
+        return "cpu";
+    }
+}
+
+std::string read_token(const std::string& path) {
+    std::ifstream in(path);
+    if (!in) throw catgs::Error("--token-file '" + path + "': cannot read the file");
+    std::string token;
+    std::getline(in, token);
+    while (!token.empty() && (token.back() == '\r' || token.back() == ' ')) token.pop_back();
+    if (token.empty()) throw catgs::Error("--token-file '" + path + "': the first line is empty");
+    return token;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+    catgs::server::ServerOptions o;
+    o.backend = "";
+    std::vector<std::string> scenes;
+    std::uint64_t max_scene_mb = 0;
+    std::string token_file, log_level = "info";
+    bool no_reflection = false;
+
+    CLI::App app{"catgs-server: streams rendered 3D Gaussian Splatting frames over gRPC (catgs.v1)"};
+    app.add_option("--address", o.address, "listen address host:port (port 0 picks a free one; it is printed)")
+        ->capture_default_str();
+    app.add_option("--health-address", o.health_address,
+                   "extra plaintext listener serving only grpc.health.v1 (for Kubernetes probes)");
+    app.add_option("--scene-root", o.scene_root, "directory that SceneService.LoadScene paths are resolved in");
+    app.add_option("--scene", scenes,
+                   "scene to load at start-up, [ID=]PATH|builtin:...; repeatable (default city=" + o.preload[0].substr(5) +
+                       ")");
+    app.add_option("--backend", o.backend, "cpu or cuda (default: cuda when a device is usable, else cpu; built in: " +
+                                               catgs::available_backends() + ")");
+    app.add_option("--precision", o.precision, "float or double")->capture_default_str();
+    app.add_option("--render-threads", o.render_threads, "CPU backend: threads per render (0: all cores)")
+        ->capture_default_str();
+    app.add_option("--render-workers", o.render_workers, "sessions rendering at the same time")->capture_default_str();
+    app.add_option("--encode-workers", o.encode_workers, "JPEG/PNG encoder threads")->capture_default_str();
+    app.add_option("--max-sessions", o.limits.max_sessions, "concurrent sessions (per GPU)")->capture_default_str();
+    app.add_option("--max-width", o.limits.max_width, "largest image width a session may request")->capture_default_str();
+    app.add_option("--max-height", o.limits.max_height, "largest image height a session may request")
+        ->capture_default_str();
+    app.add_option("--max-scene-mb", max_scene_mb, "host memory of all loaded scenes, MiB (0: no limit)")
+        ->capture_default_str();
+    app.add_option("--tls-cert", o.tls_cert_file, "PEM certificate chain (with --tls-key: serve TLS)");
+    app.add_option("--tls-key", o.tls_key_file, "PEM private key");
+    app.add_option("--tls-client-ca", o.tls_client_ca_file, "PEM CA bundle: require client certificates (mTLS)");
+    app.add_option("--token-file", token_file,
+                   "require 'authorization: Bearer <token>' metadata; the token is the file's first line "
+                   "(health checks stay open)");
+    app.add_flag("--no-reflection", no_reflection, "do not serve gRPC server reflection");
+    app.add_option("--shutdown-grace-ms", o.shutdown_grace_ms, "on SIGTERM/SIGINT, time given to running calls")
+        ->capture_default_str();
+    app.add_option("--log-level", log_level, "trace, debug, info, warn, error")->capture_default_str();
+    try {
+        app.parse(argc, argv);
+    } catch (const CLI::CallForHelp& e) {
+        return app.exit(e);
+    } catch (const CLI::CallForAllHelp& e) {
+        return app.exit(e);
+    } catch (const CLI::ParseError& e) {
+        std::cerr << "catgs-server: " << e.what() << "\n";
+        return kExitBadInput;
+    }
+
+    // SIGINT/SIGTERM are handled by one thread with sigwait; blocking them here, before any
+    // thread starts, makes every other thread inherit the mask.
+    sigset_t signals;
+    sigemptyset(&signals);
+    sigaddset(&signals, SIGINT);
+    sigaddset(&signals, SIGTERM);
+    pthread_sigmask(SIG_BLOCK, &signals, nullptr);
+
+    std::unique_ptr<catgs::server::Server> server;
+    try {
+        // Logs go to stderr: stdout carries only the "listening on port" line for scripts.
+        spdlog::set_default_logger(spdlog::stderr_color_mt("catgs-server"));
+        spdlog::set_level(spdlog::level::from_str(log_level));
+        if (!scenes.empty()) o.preload = scenes;
+        if (o.backend.empty()) o.backend = default_backend();
+        o.limits.max_scene_bytes = max_scene_mb * kMiB;
+        if (!token_file.empty()) o.bearer_token = read_token(token_file);
+        o.reflection = !no_reflection;
+        if (o.limits.max_sessions < 1) throw catgs::Error("--max-sessions must be >= 1");
+        if (o.limits.max_width < 1 || o.limits.max_height < 1) throw catgs::Error("--max-width/--max-height must be >= 1");
+        if (o.render_workers < 1 || o.encode_workers < 1)
+            throw catgs::Error("--render-workers/--encode-workers must be >= 1");
+        if (!o.bearer_token.empty() && o.tls_cert_file.empty())
+            spdlog::warn("bearer token over plaintext: anyone on the path can read it; use --tls-cert/--tls-key");
+        server = std::make_unique<catgs::server::Server>(o);
+        server->start();
+    } catch (const catgs::Error& e) {
+        std::cerr << "catgs-server: " << e.what() << "\n";
+        return kExitBadInput;
+    } catch (const std::exception& e) {
+        std::cerr << "catgs-server: failed: " << e.what() << "\n";
+        return kExitFailure;
+    }
+    // For scripts and tests that start the server on port 0.
+    std::printf("catgs-server: listening on port %d\n", server->port());
+    std::fflush(stdout);
+
+    std::thread waiter([&] {
+        int signal = 0;
+        sigwait(&signals, &signal);
+        spdlog::info("received {}", signal == SIGTERM ? "SIGTERM" : "SIGINT");
+        server->shutdown(std::chrono::milliseconds(o.shutdown_grace_ms));
+    });
+    server->wait();
+    waiter.join();
+    server.reset();
+    return 0;
+}

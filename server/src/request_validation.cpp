@@ -1,0 +1,206 @@
+#include "catgs/server/request_validation.hpp"
+
+#include <cmath>
+#include <sstream>
+
+#include "catgs/error.hpp"
+
+namespace catgs::server {
+namespace {
+
+grpc::Status invalid(const std::string& field, const std::string& problem) {
+    return {grpc::StatusCode::INVALID_ARGUMENT, field + ": " + problem};
+}
+
+std::string num(double v) {
+    std::ostringstream s;
+    s << v;
+    return s.str();
+}
+
+bool finite(const v1::Vec3& v) { return std::isfinite(v.x()) && std::isfinite(v.y()) && std::isfinite(v.z()); }
+
+/// Quaternions shorter than this cannot be normalised reliably (and mean a client bug).
+constexpr double kMinQuaternionNorm = 1e-6;
+
+grpc::Status check_pose(const v1::Pose& pose, const std::string& field) {
+    if (!pose.has_position()) return invalid(field + ".position", "missing");
+    if (!finite(pose.position()))
+        return invalid(field + ".position", "not finite (" + num(pose.position().x()) + ", " + num(pose.position().y()) +
+                                                ", " + num(pose.position().z()) + ")");
+    if (!pose.has_orientation()) return invalid(field + ".orientation", "missing");
+    const auto& q = pose.orientation();
+    if (!(std::isfinite(q.w()) && std::isfinite(q.x()) && std::isfinite(q.y()) && std::isfinite(q.z())))
+        return invalid(field + ".orientation", "quaternion is not finite");
+    const double norm = std::sqrt(q.w() * q.w() + q.x() * q.x() + q.y() * q.y() + q.z() * q.z());
+    if (!(norm >= kMinQuaternionNorm)) return invalid(field + ".orientation", "quaternion has zero length");
+    return grpc::Status::OK;
+}
+
+}  // namespace
+
+RenderOptions render_options_for(const v1::PipelineOptions& p, const v1::Color* background) {
+    RenderOptions o;
+    switch (p.culling()) {
+    case v1::CULLING_EXACT: o.culling = Culling::exact; break;
+    case v1::CULLING_BBOX3SIGMA: o.culling = Culling::bbox3sigma; break;
+    default: o.culling = Culling::opacity_aware; break;
+    }
+    if (background) o.background = {background->r(), background->g(), background->b()};
+    if (p.near_plane() > 0) o.near_plane = p.near_plane();
+    CatgsOptions& c = o.catgs;
+    // The speculative cache is on by default: it is exact within its envelope (cache.hpp) and
+    // is what makes streaming fast.
+    c.cache = p.cache() == v1::CACHE_MODE_OFF ? CacheMode::off : CacheMode::speculative;
+    if (p.fixed_window() > 0) {
+        c.adaptive_window = false;
+        c.window = static_cast<int>(p.fixed_window());
+    } else {
+        c.adaptive_window = true;
+        if (p.window_start() > 0) c.window = static_cast<int>(p.window_start());
+    }
+    switch (p.split()) {
+    case v1::SPLIT_MODE_AUTO: c.split_auto = true; break;
+    case v1::SPLIT_MODE_FIXED: c.split_k = p.split_k(); break;
+    default: break;
+    }
+    return o;
+}
+
+grpc::Status parse_session_config(const v1::SessionConfig& config, const Limits& limits, const std::string& prefix,
+                                  SessionSetup* out) {
+    const std::string f = prefix + ".";
+    if (config.scene_id().empty()) return invalid(f + "scene_id", "empty");
+    for (const auto& [name, value] : {std::pair{"width", config.width()}, std::pair{"height", config.height()}})
+        if (value < 1 || value > kMaxProtocolDimension)
+            return invalid(f + name, std::to_string(value) + " is outside 1.." + std::to_string(kMaxProtocolDimension));
+    const int width = static_cast<int>(config.width()), height = static_cast<int>(config.height());
+    if (width > limits.max_width || height > limits.max_height)
+        return {grpc::StatusCode::RESOURCE_EXHAUSTED, "max-resolution: " + std::to_string(width) + "x" +
+                                                          std::to_string(height) + " exceeds this server's limit of " +
+                                                          std::to_string(limits.max_width) + "x" +
+                                                          std::to_string(limits.max_height)};
+
+    Intrinsics k;
+    if (config.has_intrinsics()) {
+        const auto& in = config.intrinsics();
+        const std::string i = f + "intrinsics.";
+        if (!(std::isfinite(in.fx()) && in.fx() > 0)) return invalid(i + "fx", num(in.fx()) + " is not a positive focal length");
+        if (!(std::isfinite(in.fy()) && in.fy() > 0)) return invalid(i + "fy", num(in.fy()) + " is not a positive focal length");
+        if (!(std::isfinite(in.cx()) && in.cx() >= 0 && in.cx() <= width))
+            return invalid(i + "cx", "principal point " + num(in.cx()) + " is outside the image width 0.." +
+                                         std::to_string(width));
+        if (!(std::isfinite(in.cy()) && in.cy() >= 0 && in.cy() <= height))
+            return invalid(i + "cy", "principal point " + num(in.cy()) + " is outside the image height 0.." +
+                                         std::to_string(height));
+        k = Intrinsics{in.fx(), in.fy(), in.cx(), in.cy(), width, height};
+    } else {
+        const double fov = config.horizontal_fov_degrees() == 0 ? kDefaultHorizontalFovDegrees
+                                                                : config.horizontal_fov_degrees();
+        if (!(std::isfinite(fov) && fov > 0 && fov < 180))
+            return invalid(f + "horizontal_fov_degrees", num(fov) + " is outside (0, 180)");
+        k = intrinsics_from_fov(width, height, fov);
+    }
+
+    EncodeSettings e;
+    const auto& enc = config.encoding();
+    switch (enc.encoding()) {
+    case v1::ENCODING_UNSPECIFIED:
+    case v1::ENCODING_JPEG: e.format = Format::jpeg; break;
+    case v1::ENCODING_PNG: e.format = Format::png; break;
+    case v1::ENCODING_RAW_RGB8: e.format = Format::raw_rgb8; break;
+    default: return invalid(f + "encoding.encoding", "unknown value " + std::to_string(enc.encoding()));
+    }
+    if (enc.jpeg_quality() < 0 || enc.jpeg_quality() > 100)
+        return invalid(f + "encoding.jpeg_quality", std::to_string(enc.jpeg_quality()) + " is outside 1..100 (0: default)");
+    e.jpeg_quality = enc.jpeg_quality() == 0 ? kDefaultJpegQuality : enc.jpeg_quality();
+    e.jpeg_444 = enc.jpeg_subsampling() == v1::CHROMA_SUBSAMPLING_444;
+
+    if (config.has_background()) {
+        const auto& b = config.background();
+        for (float c : {b.r(), b.g(), b.b()})
+            if (!(c >= 0.0f && c <= 1.0f)) return invalid(f + "background", "components must be in [0, 1]");
+    }
+    const auto& p = config.pipeline();
+    const std::string pf = f + "pipeline.";
+    if (p.fixed_window() > static_cast<std::uint32_t>(kMaxWindow))
+        return invalid(pf + "fixed_window", std::to_string(p.fixed_window()) + " is outside 0..16");
+    if (p.window_start() > static_cast<std::uint32_t>(kMaxWindow))
+        return invalid(pf + "window_start", std::to_string(p.window_start()) + " is outside 0..16");
+    if (p.split() == v1::SPLIT_MODE_FIXED && (p.split_k() < 1 || p.split_k() > (1u << 24)))
+        return invalid(pf + "split_k", std::to_string(p.split_k()) + " is outside 1..16777216");
+    if (!(std::isfinite(p.near_plane()) && p.near_plane() >= 0))
+        return invalid(pf + "near_plane", num(p.near_plane()) + " is not a non-negative distance");
+    if (config.max_unacked_frames() > static_cast<std::uint32_t>(kMaxUnackedFramesLimit))
+        return invalid(f + "max_unacked_frames", std::to_string(config.max_unacked_frames()) + " is outside 0..2");
+
+    out->scene_id = config.scene_id();
+    out->intrinsics = k;
+    out->options = render_options_for(p, config.has_background() ? &config.background() : nullptr);
+    out->encode = e;
+    out->max_unacked_frames =
+        config.max_unacked_frames() == 0 ? kDefaultMaxUnackedFrames : static_cast<int>(config.max_unacked_frames());
+    return grpc::Status::OK;
+}
+
+Camera camera_from_pose(const v1::Pose& pose, const Intrinsics& intrinsics, std::int64_t client_timestamp_us) {
+    Camera camera;
+    camera.intrinsics = intrinsics;
+    const auto& p = pose.position();
+    const auto& q = pose.orientation();
+    camera.pose = pose_from_quaternion({p.x(), p.y(), p.z()}, {q.w(), q.x(), q.y(), q.z()});
+    // The planner derives frame intervals from timestamps: use the client's clock, which is
+    // what the motion really followed (server receive times add network jitter).
+    camera.timestamp = static_cast<double>(client_timestamp_us) * 1e-6;
+    return camera;
+}
+
+grpc::Status parse_frame_request(const v1::FrameRequest& request, const Intrinsics& intrinsics,
+                                 const std::string& prefix, FrameSetup* out) {
+    const std::string f = prefix + ".";
+    if (!request.has_pose()) return invalid(f + "pose", "missing");
+    if (grpc::Status s = check_pose(request.pose(), f + "pose"); !s.ok()) return s;
+    if (request.has_linear_velocity() && !finite(request.linear_velocity()))
+        return invalid(f + "linear_velocity", "not finite");
+    if (request.has_angular_speed() && !(std::isfinite(request.angular_speed()) && request.angular_speed() >= 0))
+        return invalid(f + "angular_speed", num(request.angular_speed()) + " is not a finite non-negative speed");
+    if (request.flight_plan_size() > kMaxFlightPlanPoses)
+        return invalid(f + "flight_plan", std::to_string(request.flight_plan_size()) + " poses; at most " +
+                                              std::to_string(kMaxFlightPlanPoses) + " are used");
+    for (int i = 0; i < request.flight_plan_size(); ++i) {
+        const std::string pf = f + "flight_plan[" + std::to_string(i) + "].pose";
+        if (!request.flight_plan(i).has_pose()) return invalid(pf, "missing");
+        if (grpc::Status s = check_pose(request.flight_plan(i).pose(), pf); !s.ok()) return s;
+    }
+    out->sequence = request.sequence();
+    out->client_timestamp_us = request.client_timestamp_us();
+    out->last_received_sequence = request.last_received_sequence();
+    try {
+        out->camera = camera_from_pose(request.pose(), intrinsics, request.client_timestamp_us());
+        out->hints.reset();
+        if (request.has_linear_velocity() || request.has_angular_speed() || request.flight_plan_size() > 0) {
+            FrameHints hints;
+            if (request.has_linear_velocity())
+                hints.linear_velocity = {request.linear_velocity().x(), request.linear_velocity().y(),
+                                         request.linear_velocity().z()};
+            if (request.has_angular_speed()) hints.angular_speed = request.angular_speed();
+            for (const auto& planned : request.flight_plan())
+                hints.plan.push_back(camera_from_pose(planned.pose(), intrinsics, planned.client_timestamp_us()));
+            out->hints = std::move(hints);
+        }
+    } catch (const Error& e) {
+        return invalid(f + "pose", e.what());
+    }
+    return grpc::Status::OK;
+}
+
+v1::Encoding to_proto(Format format) {
+    switch (format) {
+    case Format::jpeg: return v1::ENCODING_JPEG;
+    case Format::png: return v1::ENCODING_PNG;
+    case Format::raw_rgb8: return v1::ENCODING_RAW_RGB8;
+    }
+    return v1::ENCODING_UNSPECIFIED;
+}
+
+}  // namespace catgs::server

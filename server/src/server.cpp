@@ -1,0 +1,150 @@
+#include "catgs/server/server.hpp"
+
+#include <grpcpp/ext/proto_server_reflection_plugin.h>
+#include <grpcpp/health_check_service_interface.h>
+#include <spdlog/spdlog.h>
+
+#include <fstream>
+#include <sstream>
+
+#include "catgs/error.hpp"
+#include "catgs/server/net_config.hpp"
+#include "catgs/server/services.hpp"
+#include "catgs/server/stream_session.hpp"
+
+namespace catgs::server {
+namespace {
+
+std::string read_file(const std::string& path, const std::string& flag) {
+    std::ifstream in(path, std::ios::binary);
+    if (!in) throw Error(flag + " '" + path + "': cannot read the file");
+    std::ostringstream s;
+    s << in.rdbuf();
+    return s.str();
+}
+
+std::shared_ptr<grpc::ServerCredentials> credentials(const ServerOptions& o) {
+    if (o.tls_cert_file.empty() && o.tls_key_file.empty()) return grpc::InsecureServerCredentials();
+    if (o.tls_cert_file.empty() || o.tls_key_file.empty())
+        throw Error("--tls-cert and --tls-key: give both or neither");
+    grpc::SslServerCredentialsOptions ssl;
+    ssl.pem_key_cert_pairs.push_back({read_file(o.tls_key_file, "--tls-key"), read_file(o.tls_cert_file, "--tls-cert")});
+    if (!o.tls_client_ca_file.empty()) {
+        // mTLS: clients must present a certificate signed by this CA.
+        ssl.pem_root_certs = read_file(o.tls_client_ca_file, "--tls-client-ca");
+        ssl.client_certificate_request = GRPC_SSL_REQUEST_AND_REQUIRE_CLIENT_CERTIFICATE_AND_VERIFY;
+    }
+    return grpc::SslServerCredentials(ssl);
+}
+
+/// Service names whose health is reported (plus "", the whole server).
+const char* const kServiceNames[] = {"catgs.v1.RenderService", "catgs.v1.SceneService"};
+
+void set_health(grpc::Server* server, bool serving) {
+    if (!server) return;
+    grpc::HealthCheckServiceInterface* health = server->GetHealthCheckService();
+    if (!health) return;
+    health->SetServingStatus(serving);  // every service, "" included
+    for (const char* name : kServiceNames) health->SetServingStatus(name, serving);
+}
+
+}  // namespace
+
+Server::Server(ServerOptions options) : core_(std::make_unique<ServerCore>(std::move(options))) {}
+
+Server::~Server() {
+    bool running;
+    {
+        std::lock_guard lock(mutex_);
+        running = server_ && !stopped_;
+    }
+    if (running) shutdown(std::chrono::milliseconds(core_->options().shutdown_grace_ms));
+    core_->stop_workers();
+}
+
+void Server::start() {
+    const ServerOptions& o = core_->options();
+    // Fail on a bad backend before listening, not at the first session.
+    core_->make_session_renderer();
+
+    for (const std::string& spec : o.preload) {
+        // "[ID=]SOURCE": an '=' before any ':' separates an id (builtin specs contain '=' later).
+        std::string id, source = spec;
+        const auto eq = spec.find('='), colon = spec.find(':');
+        if (eq != std::string::npos && (colon == std::string::npos || eq < colon)) {
+            id = spec.substr(0, eq);
+            source = spec.substr(eq + 1);
+        }
+        SceneSummary summary;
+        grpc::Status status = core_->scenes().load(id, source, false, true, &summary);
+        if (!status.ok()) throw Error("--scene '" + spec + "': " + status.error_message());
+    }
+
+    render_service_ = std::make_unique<RenderServiceImpl>(*core_);
+    scene_service_ = std::make_unique<SceneServiceImpl>(*core_);
+    grpc::EnableDefaultHealthCheckService(true);
+    // Explicit: the plugin's static initialiser is dropped by --as-needed linking otherwise.
+    if (o.reflection) grpc::reflection::InitProtoReflectionServerBuilderPlugin();
+
+    grpc::ServerBuilder builder;
+    builder.AddListeningPort(o.address, credentials(o), &port_);
+    builder.RegisterService(render_service_.get());
+    builder.RegisterService(scene_service_.get());
+    net::apply_server_args(builder);
+    server_ = builder.BuildAndStart();
+    if (!server_ || port_ == 0) throw Error("--address '" + o.address + "': cannot listen there");
+    set_health(server_.get(), true);
+
+    if (!o.health_address.empty()) {
+        // Plaintext, health only: Kubernetes' gRPC probe speaks neither TLS nor tokens.
+        grpc::ServerBuilder health_builder;
+        health_builder.AddListeningPort(o.health_address, grpc::InsecureServerCredentials(), &health_port_);
+        health_server_ = health_builder.BuildAndStart();
+        if (!health_server_ || health_port_ == 0)
+            throw Error("--health-address '" + o.health_address + "': cannot listen there");
+        set_health(health_server_.get(), true);
+    }
+    spdlog::info("catgs-server listening on port {} ({}, backend {}, {} render workers, {} encoders, max {} sessions){}",
+                 port_, o.tls_cert_file.empty() ? "plaintext" : "TLS", o.backend, o.render_workers, o.encode_workers,
+                 o.limits.max_sessions, health_port_ ? ", health on port " + std::to_string(health_port_) : "");
+}
+
+void Server::begin_shutdown() {
+    {
+        std::lock_guard lock(mutex_);
+        if (shutting_down_) return;
+        shutting_down_ = true;
+    }
+    spdlog::info("shutting down: health NOT_SERVING, refusing new sessions, draining {} stream(s)",
+                 core_->streams().size());
+    set_health(server_.get(), false);
+    set_health(health_server_.get(), false);
+    core_->admission().drain();
+    for (const auto& session : core_->streams()) session->drain({grpc::StatusCode::UNAVAILABLE, kDrainMessage});
+}
+
+void Server::shutdown(std::chrono::milliseconds grace) {
+    begin_shutdown();
+    {
+        std::lock_guard lock(mutex_);
+        if (stopped_) return;
+    }
+    const auto deadline = std::chrono::system_clock::now() + grace;
+    // Streams were finished above; unary calls (scene loads, renders) get until the deadline.
+    if (server_) server_->Shutdown(deadline);
+    core_->stop_workers();
+    if (health_server_) health_server_->Shutdown(std::chrono::system_clock::now());
+    {
+        std::lock_guard lock(mutex_);
+        stopped_ = true;
+    }
+    stopped_cv_.notify_all();
+    spdlog::info("shut down");
+}
+
+void Server::wait() {
+    std::unique_lock lock(mutex_);
+    stopped_cv_.wait(lock, [this] { return stopped_; });
+}
+
+}  // namespace catgs::server

@@ -1,0 +1,261 @@
+// Helpers of the server integration tests: an in-process server on 127.0.0.1:0 with a small
+// built-in city, stream clients, image decoders and the reference renderer.
+#pragma once
+
+#include <gtest/gtest.h>
+#include <grpcpp/grpcpp.h>
+#include <png.h>
+#include <turbojpeg.h>
+
+#include <chrono>
+#include <fstream>
+#include <memory>
+#include <string>
+#include <thread>
+
+#include "catgs/image.hpp"
+#include "catgs/renderer.hpp"
+#include "catgs/scene_io.hpp"
+#include "catgs/server/net_config.hpp"
+#include "catgs/server/request_validation.hpp"
+#include "catgs/server/server.hpp"
+#include "catgs/trajectory.hpp"
+#include "catgs/v1/catgs.grpc.pb.h"
+
+namespace catgs::test {
+
+inline constexpr const char* kTestScene = "builtin:city?gaussians=20000&seed=1";
+inline constexpr int kWidth = 160, kHeight = 90;
+
+inline server::ServerOptions test_options() {
+    server::ServerOptions o;
+    o.address = "127.0.0.1:0";
+    o.preload = {std::string("city=") + kTestScene};
+    o.backend = "cpu";
+    o.render_threads = 2;
+    o.render_workers = 2;
+    o.encode_workers = 2;
+    o.shutdown_grace_ms = 2000;
+    return o;
+}
+
+inline std::unique_ptr<server::Server> start_server(server::ServerOptions options = test_options()) {
+    auto s = std::make_unique<server::Server>(std::move(options));
+    s->start();
+    return s;
+}
+
+inline std::shared_ptr<grpc::Channel> channel_to(int port, grpc::ChannelArguments args = net::client_channel_args()) {
+    return grpc::CreateCustomChannel("127.0.0.1:" + std::to_string(port), grpc::InsecureChannelCredentials(), args);
+}
+
+/// Polls `condition` for up to `timeout`.
+template <typename F>
+bool eventually(F condition, std::chrono::milliseconds timeout = std::chrono::milliseconds(10000)) {
+    const auto end = std::chrono::steady_clock::now() + timeout;
+    while (std::chrono::steady_clock::now() < end) {
+        if (condition()) return true;
+        std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    }
+    return condition();
+}
+
+inline v1::SessionConfig session_config(v1::Encoding encoding, int quality = 0, const std::string& scene = "city") {
+    v1::SessionConfig c;
+    c.set_scene_id(scene);
+    c.set_width(kWidth);
+    c.set_height(kHeight);
+    c.set_horizontal_fov_degrees(70);
+    c.mutable_encoding()->set_encoding(encoding);
+    c.mutable_encoding()->set_jpeg_quality(quality);
+    return c;
+}
+
+inline v1::Pose pose_of(const Camera& camera) {
+    v1::Pose p;
+    const auto c = camera_centre(camera.pose);
+    const auto q = camera_to_world_quaternion(camera.pose);
+    p.mutable_position()->set_x(c[0]);
+    p.mutable_position()->set_y(c[1]);
+    p.mutable_position()->set_z(c[2]);
+    p.mutable_orientation()->set_w(q[0]);
+    p.mutable_orientation()->set_x(q[1]);
+    p.mutable_orientation()->set_y(q[2]);
+    p.mutable_orientation()->set_z(q[3]);
+    return p;
+}
+
+/// The shared test scene (generated once per process).
+inline std::shared_ptr<const Scene> test_scene() {
+    static std::shared_ptr<const Scene> scene = std::make_shared<const Scene>(load_scene(kTestScene));
+    return scene;
+}
+
+/// A UAV path over the test scene.
+inline std::vector<Camera> uav_path(int frames, int width = kWidth, int height = kHeight) {
+    return make_trajectory("builtin:flythrough?frames=" + std::to_string(frames) + "&altitude=40&speed=6",
+                           test_scene()->bounds, intrinsics_from_fov(width, height, 70));
+}
+
+inline v1::FrameRequest frame_request(std::uint64_t sequence, const Camera& camera, std::uint64_t ack) {
+    v1::FrameRequest r;
+    r.set_sequence(sequence);
+    *r.mutable_pose() = pose_of(camera);
+    r.set_client_timestamp_us(static_cast<std::int64_t>(sequence) * 33'333);
+    r.set_last_received_sequence(ack);
+    return r;
+}
+
+inline v1::StreamRequest open_message(const v1::SessionConfig& config) {
+    v1::StreamRequest r;
+    *r.mutable_open() = config;
+    return r;
+}
+
+inline v1::StreamRequest frame_message(const v1::FrameRequest& frame) {
+    v1::StreamRequest r;
+    *r.mutable_frame() = frame;
+    return r;
+}
+
+/// A synchronous stream: open it, then send/receive.
+struct StreamClient {
+    grpc::ClientContext context;
+    std::unique_ptr<v1::RenderService::Stub> stub;
+    std::unique_ptr<grpc::ClientReaderWriter<v1::StreamRequest, v1::Frame>> stream;
+
+    explicit StreamClient(const std::shared_ptr<grpc::Channel>& channel, const std::string& authorization = "")
+        : stub(v1::RenderService::NewStub(channel)) {
+        if (!authorization.empty()) context.AddMetadata("authorization", authorization);
+        context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(60));
+        stream = stub->Stream(&context);
+    }
+    bool open(const v1::SessionConfig& config) { return stream->Write(open_message(config)); }
+    bool send(const v1::FrameRequest& frame) { return stream->Write(frame_message(frame)); }
+    grpc::Status close() {
+        stream->WritesDone();
+        v1::Frame ignored;
+        while (stream->Read(&ignored)) {
+        }
+        return stream->Finish();
+    }
+    /// Reads until the stream ends; returns its status.
+    grpc::Status finish() {
+        v1::Frame ignored;
+        while (stream->Read(&ignored)) {
+        }
+        return stream->Finish();
+    }
+};
+
+inline ImageRGB8 decode_png(const std::string& data) {
+    png_image image{};
+    image.version = PNG_IMAGE_VERSION;
+    EXPECT_NE(png_image_begin_read_from_memory(&image, data.data(), data.size()), 0) << image.message;
+    image.format = PNG_FORMAT_RGB;
+    ImageRGB8 out;
+    out.width = static_cast<int>(image.width);
+    out.height = static_cast<int>(image.height);
+    out.rgb.resize(PNG_IMAGE_SIZE(image));
+    EXPECT_NE(png_image_finish_read(&image, nullptr, out.rgb.data(), 0, nullptr), 0) << image.message;
+    return out;
+}
+
+inline ImageRGB8 decode_jpeg(const std::string& data) {
+    tjhandle handle = tjInitDecompress();
+    int width = 0, height = 0, subsampling = 0, colorspace = 0;
+    auto* bytes = reinterpret_cast<const unsigned char*>(data.data());
+    EXPECT_EQ(tjDecompressHeader3(handle, bytes, data.size(), &width, &height, &subsampling, &colorspace), 0);
+    ImageRGB8 out;
+    out.width = width;
+    out.height = height;
+    out.rgb.resize(3 * static_cast<std::size_t>(width) * static_cast<std::size_t>(height));
+    EXPECT_EQ(tjDecompress2(handle, bytes, data.size(), out.rgb.data(), width, 0, height, TJPF_RGB, 0), 0);
+    tjDestroy(handle);
+    return out;
+}
+
+inline ImageRGB8 decode_frame(const v1::Frame& frame) {
+    switch (frame.encoding()) {
+    case v1::ENCODING_PNG: return decode_png(frame.data());
+    case v1::ENCODING_JPEG: return decode_jpeg(frame.data());
+    default: {
+        ImageRGB8 out;
+        out.width = static_cast<int>(frame.width());
+        out.height = static_cast<int>(frame.height());
+        out.rgb.assign(frame.data().begin(), frame.data().end());
+        return out;
+    }
+    }
+}
+
+/// Current resident set size of this process (kB), from /proc/self/status.
+inline long rss_kb() {
+    std::ifstream in("/proc/self/status");
+    std::string line;
+    while (std::getline(in, line))
+        if (line.rfind("VmRSS:", 0) == 0) return std::stol(line.substr(6));
+    return -1;
+}
+
+/// A healthy stream that keeps rendering in lock step on its own thread while a test does
+/// something nasty; `frames` counts what it received.
+class BackgroundStream {
+public:
+    explicit BackgroundStream(int port) : channel_(channel_to(port)), client_(channel_) {
+        thread_ = std::thread([this] { run(); });
+    }
+    ~BackgroundStream() { stop(); }
+    void stop() {
+        stop_ = true;
+        if (thread_.joinable()) thread_.join();
+    }
+    int frames() const { return frames_; }
+    bool failed() const { return failed_; }
+    std::string failure() const { return failure_; }
+    /// Waits until at least `more` further frames arrived.
+    bool advances(int more, std::chrono::milliseconds timeout = std::chrono::milliseconds(20000)) {
+        const int start = frames_;
+        return eventually([&] { return frames_ >= start + more; }, timeout);
+    }
+
+private:
+    void run() {
+        const auto path = uav_path(60);
+        if (!client_.open(session_config(v1::ENCODING_JPEG, 80))) {
+            failed_ = true;
+            failure_ = "open failed";
+            return;
+        }
+        std::uint64_t seq = 0, ack = 0;
+        while (!stop_) {
+            ++seq;
+            if (!client_.send(frame_request(seq, path[seq % path.size()], ack))) break;
+            v1::Frame frame;
+            if (!client_.stream->Read(&frame)) break;
+            if (frame.has_error()) {
+                failed_ = true;
+                failure_ = frame.error().message();
+            }
+            ack = frame.sequence();
+            ++frames_;
+        }
+        client_.stream->WritesDone();
+        v1::Frame rest;
+        while (client_.stream->Read(&rest)) {
+        }
+        grpc::Status s = client_.stream->Finish();
+        if (!stop_ || !s.ok()) {
+            failed_ = true;
+            failure_ = "stream ended early: " + s.error_message();
+        }
+    }
+    std::shared_ptr<grpc::Channel> channel_;
+    StreamClient client_;
+    std::thread thread_;
+    std::atomic<bool> stop_{false}, failed_{false};
+    std::atomic<int> frames_{0};
+    std::string failure_;
+};
+
+}  // namespace catgs::test

@@ -1,0 +1,208 @@
+// Bad requests: every one gets the right status code and a message naming the field, and a
+// healthy stream on the same server keeps receiving frames meanwhile.
+#include <cmath>
+#include <limits>
+
+#include "server_test_util.hpp"
+
+namespace catgs::test {
+namespace {
+
+constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
+constexpr double kInf = std::numeric_limits<double>::infinity();
+
+class BadRequestTest : public ::testing::Test {
+protected:
+    static void SetUpTestSuite() {
+        server::ServerOptions o = test_options();
+        o.limits.max_width = 1920;
+        o.limits.max_height = 1080;
+        server_ = start_server(o).release();
+    }
+    static void TearDownTestSuite() {
+        delete server_;
+        server_ = nullptr;
+    }
+    void SetUp() override {
+        healthy_ = std::make_unique<BackgroundStream>(server_->port());
+        ASSERT_TRUE(healthy_->advances(2)) << "the healthy stream does not run";
+    }
+    void TearDown() override {
+        // The healthy stream kept going through whatever the test did.
+        EXPECT_TRUE(healthy_->advances(3)) << "the healthy stream stalled";
+        healthy_->stop();
+        EXPECT_FALSE(healthy_->failed()) << healthy_->failure();
+    }
+
+    /// Opens a stream with `config` and expects it to fail with `code` and `message` in its text.
+    static void expect_open_fails(const v1::SessionConfig& config, grpc::StatusCode code, const std::string& message) {
+        StreamClient client(channel_to(server_->port()));
+        client.open(config);
+        client.send(frame_request(1, uav_path(2)[0], 0));
+        const grpc::Status status = client.close();
+        EXPECT_EQ(status.error_code(), code) << status.error_message();
+        EXPECT_NE(status.error_message().find(message), std::string::npos)
+            << "'" << status.error_message() << "' does not contain '" << message << "'";
+    }
+
+    static server::Server* server_;
+    std::unique_ptr<BackgroundStream> healthy_;
+};
+server::Server* BadRequestTest::server_ = nullptr;
+
+TEST_F(BadRequestTest, StreamWithoutOpeningMessage) {
+    StreamClient client(channel_to(server_->port()));
+    ASSERT_TRUE(client.send(frame_request(1, uav_path(2)[0], 0)));
+    const grpc::Status status = client.close();
+    EXPECT_EQ(status.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+    EXPECT_NE(status.error_message().find("open: the first message of a stream must be StreamRequest.open"),
+              std::string::npos)
+        << status.error_message();
+}
+
+TEST_F(BadRequestTest, StreamClosedBeforeOpening) {
+    StreamClient client(channel_to(server_->port()));
+    const grpc::Status status = client.close();
+    EXPECT_EQ(status.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+    EXPECT_NE(status.error_message().find("open: the stream ended before its opening message"), std::string::npos)
+        << status.error_message();
+}
+
+TEST_F(BadRequestTest, ZeroAndHugeResolution) {
+    v1::SessionConfig config = session_config(v1::ENCODING_JPEG);
+    config.set_width(0);
+    expect_open_fails(config, grpc::StatusCode::INVALID_ARGUMENT, "open.width: 0 is outside 1..16384");
+    config = session_config(v1::ENCODING_JPEG);
+    config.set_height(1'000'000);
+    expect_open_fails(config, grpc::StatusCode::INVALID_ARGUMENT, "open.height: 1000000 is outside 1..16384");
+}
+
+TEST_F(BadRequestTest, ResolutionAboveTheServerLimitIsResourceExhausted) {
+    v1::SessionConfig config = session_config(v1::ENCODING_JPEG);
+    config.set_width(3840);
+    config.set_height(2160);
+    expect_open_fails(config, grpc::StatusCode::RESOURCE_EXHAUSTED,
+                      "max-resolution: 3840x2160 exceeds this server's limit of 1920x1080");
+}
+
+TEST_F(BadRequestTest, UnknownScene) {
+    expect_open_fails(session_config(v1::ENCODING_JPEG, 0, "atlantis"), grpc::StatusCode::INVALID_ARGUMENT,
+                      "open.scene_id 'atlantis': no such scene");
+    expect_open_fails(session_config(v1::ENCODING_JPEG, 0, ""), grpc::StatusCode::INVALID_ARGUMENT,
+                      "open.scene_id: empty");
+}
+
+TEST_F(BadRequestTest, IntrinsicsThatDisagreeWithTheResolution) {
+    v1::SessionConfig config = session_config(v1::ENCODING_JPEG);
+    auto* k = config.mutable_intrinsics();
+    k->set_fx(100);
+    k->set_fy(100);
+    k->set_cx(kWidth + 5);  // principal point right of the image
+    k->set_cy(kHeight / 2.0);
+    expect_open_fails(config, grpc::StatusCode::INVALID_ARGUMENT,
+                      "open.intrinsics.cx: principal point 165 is outside the image width 0..160");
+    k->set_cx(kWidth / 2.0);
+    k->set_cy(-1);
+    expect_open_fails(config, grpc::StatusCode::INVALID_ARGUMENT,
+                      "open.intrinsics.cy: principal point -1 is outside the image height 0..90");
+    k->set_cy(kHeight / 2.0);
+    k->set_fx(0);
+    expect_open_fails(config, grpc::StatusCode::INVALID_ARGUMENT, "open.intrinsics.fx: 0 is not a positive focal length");
+    k->set_fx(100);
+    k->set_fy(kNaN);
+    expect_open_fails(config, grpc::StatusCode::INVALID_ARGUMENT, "open.intrinsics.fy: nan is not a positive focal length");
+}
+
+TEST_F(BadRequestTest, BadEncodingAndPipelineOptions) {
+    v1::SessionConfig config = session_config(v1::ENCODING_JPEG, 101);
+    expect_open_fails(config, grpc::StatusCode::INVALID_ARGUMENT, "open.encoding.jpeg_quality: 101 is outside 1..100");
+    config = session_config(v1::ENCODING_JPEG);
+    config.mutable_pipeline()->set_fixed_window(17);
+    expect_open_fails(config, grpc::StatusCode::INVALID_ARGUMENT, "open.pipeline.fixed_window: 17 is outside 0..16");
+    config = session_config(v1::ENCODING_JPEG);
+    config.set_max_unacked_frames(5);
+    expect_open_fails(config, grpc::StatusCode::INVALID_ARGUMENT, "open.max_unacked_frames: 5 is outside 0..2");
+}
+
+/// Bad frame requests get an error frame each, and the session goes on rendering good ones.
+TEST_F(BadRequestTest, BadFrameRequestsAnswerThatFrameAndKeepTheSession) {
+    const auto path = uav_path(4);
+    StreamClient client(channel_to(server_->port()));
+    ASSERT_TRUE(client.open(session_config(v1::ENCODING_JPEG)));
+    struct Case {
+        const char* name;
+        std::function<void(v1::FrameRequest&)> spoil;
+        std::string message;
+    };
+    const std::vector<Case> cases = {
+        {"NaN position", [](v1::FrameRequest& r) { r.mutable_pose()->mutable_position()->set_y(kNaN); },
+         "frame.pose.position: not finite"},
+        {"infinite quaternion", [](v1::FrameRequest& r) { r.mutable_pose()->mutable_orientation()->set_w(kInf); },
+         "frame.pose.orientation: quaternion is not finite"},
+        {"zero quaternion",
+         [](v1::FrameRequest& r) {
+             auto* q = r.mutable_pose()->mutable_orientation();
+             q->set_w(0), q->set_x(0), q->set_y(0), q->set_z(0);
+         },
+         "frame.pose.orientation: quaternion has zero length"},
+        {"missing pose", [](v1::FrameRequest& r) { r.clear_pose(); }, "frame.pose: missing"},
+        {"NaN velocity", [](v1::FrameRequest& r) { r.mutable_linear_velocity()->set_x(kNaN); },
+         "frame.linear_velocity: not finite"},
+        {"NaN flight plan",
+         [](v1::FrameRequest& r) {
+             auto* p = r.add_flight_plan();
+             *p->mutable_pose() = r.pose();
+             p->mutable_pose()->mutable_position()->set_z(kNaN);
+         },
+         "frame.flight_plan[0].pose.position: not finite"},
+    };
+    std::uint64_t seq = 0, ack = 0;
+    for (const Case& c : cases) {
+        SCOPED_TRACE(c.name);
+        ++seq;
+        v1::FrameRequest bad = frame_request(seq, path[seq % 4], ack);
+        c.spoil(bad);
+        ASSERT_TRUE(client.send(bad));
+        v1::Frame frame;
+        ASSERT_TRUE(client.stream->Read(&frame));
+        EXPECT_EQ(frame.sequence(), seq);
+        ASSERT_TRUE(frame.has_error());
+        EXPECT_EQ(frame.error().code(), static_cast<int>(grpc::StatusCode::INVALID_ARGUMENT));
+        EXPECT_NE(frame.error().message().find(c.message), std::string::npos) << frame.error().message();
+        EXPECT_TRUE(frame.data().empty());
+        // The next good request still renders.
+        ++seq;
+        ASSERT_TRUE(client.send(frame_request(seq, path[seq % 4], ack)));
+        ASSERT_TRUE(client.stream->Read(&frame));
+        EXPECT_FALSE(frame.has_error()) << frame.error().message();
+        EXPECT_EQ(frame.sequence(), seq);
+        EXPECT_FALSE(frame.data().empty());
+        ack = frame.sequence();
+    }
+    // A repeated sequence number is refused too.
+    ASSERT_TRUE(client.send(frame_request(seq, path[0], ack)));
+    v1::Frame frame;
+    ASSERT_TRUE(client.stream->Read(&frame));
+    ASSERT_TRUE(frame.has_error());
+    EXPECT_NE(frame.error().message().find("frame.sequence: " + std::to_string(seq) + " is not greater than the previous"),
+              std::string::npos)
+        << frame.error().message();
+    EXPECT_EQ(frame.stats().frame_errors(), cases.size() + 1);
+    EXPECT_TRUE(client.close().ok());
+}
+
+TEST_F(BadRequestTest, UnaryRenderValidatesToo) {
+    v1::RenderRequest request;
+    *request.mutable_config() = session_config(v1::ENCODING_PNG);
+    *request.mutable_frame() = frame_request(1, uav_path(2)[0], 0);
+    request.mutable_frame()->mutable_pose()->mutable_position()->set_x(kInf);
+    auto stub = v1::RenderService::NewStub(channel_to(server_->port()));
+    grpc::ClientContext context;
+    v1::Frame frame;
+    const grpc::Status status = stub->Render(&context, request, &frame);
+    EXPECT_EQ(status.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+    EXPECT_NE(status.error_message().find("frame.pose.position: not finite"), std::string::npos) << status.error_message();
+}
+
+}  // namespace
+}  // namespace catgs::test
