@@ -151,8 +151,13 @@ __global__ void preprocess_kernel(DeviceSceneView scene, const View<T>* views, i
                     inverse_depth = 1.0 / static_cast<double>(p.depth);
                     const TileRect r = tile_rect(p, culling, actual.tiles_x, actual.tiles_y);
                     if (!(r.x0 == 0 && r.y0 == 0 && r.x1 == actual.tiles_x && r.y1 == actual.tiles_y)) {
+                        // Current 2D extent, or the projected 3D size (needles seen end-on).
                         const Vec2<T> e = footprint_extent(p, culling);
-                        extent = fmaxf(0.0f, fmaxf(static_cast<float>(e.x), static_cast<float>(e.y)));
+                        const float* sc = g.scale;
+                        const T bound = footprint_bound_px(p, culling, static_cast<T>(fmaxf(sc[0], fmaxf(sc[1], sc[2]))),
+                                                           actual.fx > actual.fy ? actual.fx : actual.fy);
+                        extent = fmaxf(0.0f, fmaxf(fmaxf(static_cast<float>(e.x), static_cast<float>(e.y)),
+                                                   static_cast<float>(bound)));
                     }
                 }
             }

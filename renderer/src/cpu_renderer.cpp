@@ -96,7 +96,7 @@ FrameStats CpuRenderer<T>::render(const Scene& scene, const Camera& camera, cons
         t = Clock::now();
         split_k_ = build_tasks(options.catgs);
         stats.split_ms = elapsed_ms(t);
-        if (options.catgs.cache != CacheMode::off) planner_.key_rendered(plan, summarize(window, options.culling));
+        if (options.catgs.cache != CacheMode::off) planner_.key_rendered(plan, summarize(scene, window, options.culling));
     } else {
         reproject(scene, view);
         stats.preprocess_ms = elapsed_ms(t);
@@ -416,10 +416,11 @@ void CpuRenderer<T>::merge(const View<T>& view, const RenderOptions& options, Im
 }
 
 // What the planner needs to bound screen motion: the nearest cached depth over the window's
-// poses, the mean inverse depth at the key pose, and the largest footprint that does not
-// already cover the whole grid (a full-grid footprint cannot gain tiles).
+// poses, the mean inverse depth at the key pose, and a bound on the footprints that do not
+// already cover the whole grid (a full-grid footprint cannot gain tiles): the larger of the
+// current 2D extent and the projected 3D size, which also covers needles seen end-on.
 template <typename T>
-KeyFrameSummary CpuRenderer<T>::summarize(const Window& window, Culling culling) const {
+KeyFrameSummary CpuRenderer<T>::summarize(const Scene& scene, const Window& window, Culling culling) const {
     KeyFrameSummary s;
     s.min_depth = window_min_depth_;
     double inverse_sum = 0;
@@ -434,7 +435,11 @@ KeyFrameSummary CpuRenderer<T>::summarize(const Window& window, Culling culling)
         const TileRect r = tile_rect(p, culling, key.tiles_x, key.tiles_y);
         if (!(r.x0 == 0 && r.y0 == 0 && r.x1 == key.tiles_x && r.y1 == key.tiles_y)) {
             const Vec2<T> e = footprint_extent(p, culling);
-            s.max_extent_px = std::max({s.max_extent_px, static_cast<double>(e.x), static_cast<double>(e.y)});
+            const float* sc = &scene.scales[3 * i];
+            const T bound = footprint_bound_px(p, culling, static_cast<T>(std::max({sc[0], sc[1], sc[2]})),
+                                               std::max(key.fx, key.fy));
+            s.max_extent_px = std::max({s.max_extent_px, static_cast<double>(e.x), static_cast<double>(e.y),
+                                        static_cast<double>(bound)});
         }
     }
     s.mean_inverse_depth = visible ? inverse_sum / static_cast<double>(visible) : 0.0;

@@ -40,6 +40,10 @@ inline constexpr double kMinTransmittance = 1e-4;
 /// on grey) and clamped at zero, as graphdeco does; the upper clamp happens on output.
 inline constexpr double kShColourOffset = 0.5;
 
+/// SH colours are clamped at this value: far above anything displayable (outputs clamp to 1),
+/// yet small enough that C + T * background stays finite in float for any coefficients.
+inline constexpr double kMaxShColour = 1e4;
+
 /// The highest SH degree a scene may carry (16 coefficients per channel).
 inline constexpr int kMaxShDegree = 3;
 

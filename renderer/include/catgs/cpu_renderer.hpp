@@ -70,7 +70,7 @@ private:
     std::uint32_t build_tasks(const CatgsOptions& options);
     void rasterize(const View<T>& view, const RenderOptions& options, ImageF& out);
     void merge(const View<T>& view, const RenderOptions& options, ImageF& out);
-    KeyFrameSummary summarize(const Window& window, Culling culling) const;
+    KeyFrameSummary summarize(const Scene& scene, const Window& window, Culling culling) const;
 
     /// Projects Gaussian i against every pose of the window into `poses`; returns the mask of
     /// poses where it is visible. Shared by the count and the emit pass.

@@ -25,10 +25,12 @@ CATGS_HD bool blend_gaussian(PixelAccumulator<T>& acc, Vec2<T> mean, Vec3<T> con
                              T py, T min_transmittance = static_cast<T>(kMinTransmittance)) {
     const T dx = mean.x - px, dy = mean.y - py;
     const T power = T(-0.5) * (conic.x * dx * dx + conic.z * dy * dy) - conic.y * dx * dy;
-    if (power > T(0)) return false;
+    // Written so that NaN fails both tests: far off-screen means can make the quadratic form
+    // inf - inf, and min(0.99, NaN) would otherwise draw a NaN alpha as 0.99.
+    if (!(power <= T(0))) return false;
     T alpha = opacity * exp_of(power);
+    if (!(alpha >= static_cast<T>(kMinAlpha))) return false;
     alpha = alpha < static_cast<T>(kMaxAlpha) ? alpha : static_cast<T>(kMaxAlpha);
-    if (alpha < static_cast<T>(kMinAlpha)) return false;
     const T next = acc.transmittance * (T(1) - alpha);
     if (next < min_transmittance) {
         acc.done = true;

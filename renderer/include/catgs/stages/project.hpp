@@ -72,12 +72,18 @@ CATGS_HD bool project_geometry(const GaussianRef& g, const View<T>& view, Projec
     const Mat3<T> s2 = jw * cov3 * transpose(jw);
     const T blur = static_cast<T>(kCovarianceBlur);
     const T cxx = s2.m[0][0] + blur, cxy = s2.m[0][1], cyy = s2.m[1][1] + blur;
-    const T det = cxx * cyy - cxy * cxy;
-    if (!(det > T(0)) || !is_finite(det)) return false;
-    const T inv_det = T(1) / det;
+    // The determinant is formed on the covariance scaled to unit size: a Gaussian around the
+    // camera has entries ~1e20 px^2 whose plain determinant overflows float, though its
+    // conic is perfectly representable.
+    const T size = cxx > cyy ? cxx : cyy;
+    if (!(size > T(0)) || !is_finite(size)) return false;
+    const T nxx = cxx / size, nxy = cxy / size, nyy = cyy / size;
+    const T det = nxx * nyy - nxy * nxy;
+    if (!(det > T(0))) return false;
+    const T inv_det = T(1) / (det * size);
 
     out.mean = {view.fx * pc.x * inv_z + view.cx, view.fy * pc.y * inv_z + view.cy};
-    out.conic = {cyy * inv_det, -cxy * inv_det, cxx * inv_det};
+    out.conic = {nyy * inv_det, -nxy * inv_det, nxx * inv_det};
     out.cov = {cxx, cxy, cyy};
     out.depth = pc.z;
     out.opacity = static_cast<T>(g.opacity);

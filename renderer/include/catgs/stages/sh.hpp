@@ -51,8 +51,11 @@ CATGS_HD Vec3<T> sh_colour(const float* coefficients, int degree, Vec3<T> dir) {
         }
     }
     const T offset = static_cast<T>(kShColourOffset);
-    c = {c.x + offset, c.y + offset, c.z + offset};
-    return {c.x > 0 ? c.x : T(0), c.y > 0 ? c.y : T(0), c.z > 0 ? c.z : T(0)};
+    // Clamped at 0 (graphdeco) and at kMaxShColour, with NaN (inf - inf of huge
+    // coefficients) taken as 0, so no colour can make a pixel non-finite.
+    const T top = static_cast<T>(kMaxShColour);
+    auto clamp = [top](T v) { return v > T(0) ? (v < top ? v : top) : T(0); };
+    return {clamp(c.x + offset), clamp(c.y + offset), clamp(c.z + offset)};
 }
 
 }  // namespace catgs

@@ -73,6 +73,17 @@ CATGS_HD Vec2<T> footprint_extent(const Projected<T>& g, Culling mode) {
     return {sqrt_of(level * g.cov.x), sqrt_of(level * g.cov.z)};
 }
 
+/// An upper bound (pixels) on a footprint's half-extent at any pose near the current one: the
+/// Gaussian's largest 3D scale projected at its depth, times the culling mode's sigma
+/// multiple, plus the blur. Unlike the current 2D extent it does not vanish for a needle
+/// seen end-on, whose footprint grows fast as the view turns; the cache envelope uses it.
+template <typename T>
+CATGS_HD T footprint_bound_px(const Projected<T>& g, Culling mode, T max_scale, T focal) {
+    const T level = opacity_level(g.opacity);
+    const T sigmas = mode == Culling::bbox3sigma ? static_cast<T>(kBBoxSigmas) : sqrt_of(level > T(0) ? level : T(0));
+    return sigmas * (focal * max_scale / g.depth + sqrt_of(static_cast<T>(kCovarianceBlur)));
+}
+
 /// Tile rectangle of a Gaussian under a culling mode (exact mode: the whole grid), with the
 /// footprint dilated by `guard` pixels (speculative windows; 0 for a single frame).
 template <typename T>
