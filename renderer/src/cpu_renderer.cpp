@@ -87,15 +87,7 @@ FrameStats CpuRenderer<T>::render(const Scene& scene, const Camera& camera, cons
             emitted_values_ = values_;
         }
         stats.keys_ms = elapsed_ms(t);
-        t = Clock::now();
-        sort_pairs(view);
-        stats.sort_ms = elapsed_ms(t);
-        t = Clock::now();
-        find_tile_ranges(view, options.culling);
-        stats.ranges_ms = elapsed_ms(t);
-        t = Clock::now();
-        split_k_ = build_tasks(options.catgs);
-        stats.split_ms = elapsed_ms(t);
+        sort_and_schedule(view, options, stats);
         if (options.catgs.cache != CacheMode::off) planner_.key_rendered(plan, summarize(scene, window, options.culling));
     } else {
         reproject(scene, view);
@@ -104,15 +96,7 @@ FrameStats CpuRenderer<T>::render(const Scene& scene, const Camera& camera, cons
             t = Clock::now();
             rekey_pairs(view, options.culling);
             stats.keys_ms = elapsed_ms(t);
-            t = Clock::now();
-            sort_pairs(view);
-            stats.sort_ms = elapsed_ms(t);
-            t = Clock::now();
-            find_tile_ranges(view, options.culling);
-            stats.ranges_ms = elapsed_ms(t);
-            t = Clock::now();
-            split_k_ = build_tasks(options.catgs);
-            stats.split_ms = elapsed_ms(t);
+            sort_and_schedule(view, options, stats);
         }
     }
     t = Clock::now();
@@ -128,6 +112,21 @@ FrameStats CpuRenderer<T>::render(const Scene& scene, const Camera& camera, cons
     stats.split_k = split_k_;
     for (std::size_t i = 0; i < projected_.size(); ++i) stats.visible += tiles_touched_[i] > 0 && projected_[i].opacity > 0;
     return stats;
+}
+
+// Sort, tile ranges and the task list, timed: what key frames and re-sorting cached frames
+// run after their keys are in place.
+template <typename T>
+void CpuRenderer<T>::sort_and_schedule(const View<T>& view, const RenderOptions& options, FrameStats& stats) {
+    auto t = Clock::now();
+    sort_pairs(view);
+    stats.sort_ms = elapsed_ms(t);
+    t = Clock::now();
+    find_tile_ranges(view, options.culling);
+    stats.ranges_ms = elapsed_ms(t);
+    t = Clock::now();
+    split_k_ = build_tasks(options.catgs);
+    stats.split_ms = elapsed_ms(t);
 }
 
 template <typename T>

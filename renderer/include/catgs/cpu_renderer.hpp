@@ -68,6 +68,7 @@ private:
     void rekey_pairs(const View<T>& view, Culling culling);
     void find_tile_ranges(const View<T>& view, Culling culling);
     std::uint32_t build_tasks(const CatgsOptions& options);
+    void sort_and_schedule(const View<T>& view, const RenderOptions& options, FrameStats& stats);
     void rasterize(const View<T>& view, const RenderOptions& options, ImageF& out);
     void merge(const View<T>& view, const RenderOptions& options, ImageF& out);
     KeyFrameSummary summarize(const Scene& scene, const Window& window, Culling culling) const;
