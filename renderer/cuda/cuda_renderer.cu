@@ -117,8 +117,8 @@ __device__ std::uint32_t project_window(const DeviceSceneView& scene, std::uint6
 // planner needs: nearest depth, mean inverse depth, largest footprint.
 template <typename T, int MaxWindow, bool Summarize>
 __global__ void preprocess_kernel(DeviceSceneView scene, const View<T>* views, int window, View<T> actual, bool reproject_actual,
-                      Culling culling, T guard, Projected<T>* projected, std::uint64_t* touched, float* sort_depth,
-                      FrameCounters* counters) {
+                      Culling culling, T guard, T guard_translation, Projected<T>* projected, std::uint64_t* touched,
+                      float* sort_depth, FrameCounters* counters) {
     const std::uint64_t i = static_cast<std::uint64_t>(blockIdx.x) * blockDim.x + threadIdx.x;
     bool visible = false;
     float nearest = INFINITY, extent = 0.0f;
@@ -129,6 +129,16 @@ __global__ void preprocess_kernel(DeviceSceneView scene, const View<T>* views, i
         const std::uint32_t tiles =
             for_each_window_tile<MaxWindow>(poses, valid, window, culling, guard, views[0], [](std::uint32_t) {});
         touched[i] = tiles;
+        if (Summarize && tiles == 0 && guard > T(0) && culling != Culling::exact && (valid & 1u)) {
+            // As CpuRenderer::preprocess: in no list, but able to enter the image within the envelope.
+            const float* sc = gaussian_ref(scene, i).scale;
+            T bound = T(0);
+            if (uncached_can_enter(poses[0], culling, views[0], guard, guard_translation,
+                                   static_cast<T>(fmaxf(fabsf(sc[0]), fmaxf(fabsf(sc[1]), fabsf(sc[2])))), bound)) {
+                nearest = fminf(nearest, static_cast<float>(poses[0].depth));
+                extent = fmaxf(extent, static_cast<float>(bound));
+            }
+        }
         if (tiles > 0) {
             sort_depth[i] = static_cast<float>(poses[first_valid_pose(valid)].depth);
             // At the actual pose: pose 0's geometry unless the window lowered the near plane;
@@ -149,8 +159,9 @@ __global__ void preprocess_kernel(DeviceSceneView scene, const View<T>* views, i
                     if (k < window && (valid >> k & 1u)) nearest = fminf(nearest, static_cast<float>(poses[k].depth));
                 if (at_actual) {
                     inverse_depth = 1.0 / static_cast<double>(p.depth);
-                    const TileRect r = tile_rect(p, culling, actual.tiles_x, actual.tiles_y);
-                    if (!(r.x0 == 0 && r.y0 == 0 && r.x1 == actual.tiles_x && r.y1 == actual.tiles_y)) {
+                    // As CpuRenderer::summarize: only a Gaussian in every list cannot gain tiles.
+                    if (culling != Culling::exact &&
+                        tiles < static_cast<std::uint32_t>(actual.tiles_x) * static_cast<std::uint32_t>(actual.tiles_y)) {
                         // Current 2D extent, or the projected 3D size (needles seen end-on).
                         const Vec2<T> e = footprint_extent(p, culling);
                         const float* sc = g.scale;
@@ -705,22 +716,23 @@ FrameStats CudaRenderer<T>::render(const Camera& camera, const RenderOptions& op
         CATGS_CUDA_CHECK(
             cudaMemcpyAsync(m.views.data(), m.host_views, w * sizeof(View<T>), cudaMemcpyHostToDevice, s));
         const T guard = speculative ? static_cast<T>(catgs.guard_px) : T(0);
+        const T guard_translation = speculative ? static_cast<T>(catgs.guard_translation) : T(0);
         CATGS_CUDA_CHECK(cudaMemsetAsync(m.touched.data() + n, 0, sizeof(std::uint64_t), s));
         if (n > 0) {
             const unsigned blocks = blocks_for(n, kThreads);
             if (w == 1 && catgs.cache == CacheMode::off)
                 preprocess_kernel<T, 1, false><<<blocks, kThreads, 0, s>>>(sv, m.views.data(), 1, view, reproject_actual,
-                                                                           options.culling, guard, m.projected.data(),
+                                                                           options.culling, guard, guard_translation, m.projected.data(),
                                                                            m.touched.data(), m.sort_depth.data(),
                                                                            frame_counters);
             else if (w == 1)
                 preprocess_kernel<T, 1, true><<<blocks, kThreads, 0, s>>>(sv, m.views.data(), 1, view, reproject_actual,
-                                                                          options.culling, guard, m.projected.data(),
+                                                                          options.culling, guard, guard_translation, m.projected.data(),
                                                                           m.touched.data(), m.sort_depth.data(),
                                                                           frame_counters);
             else
                 preprocess_kernel<T, kMaxWindow, true><<<blocks, kThreads, 0, s>>>(
-                    sv, m.views.data(), w, view, reproject_actual, options.culling, guard, m.projected.data(),
+                    sv, m.views.data(), w, view, reproject_actual, options.culling, guard, guard_translation, m.projected.data(),
                     m.touched.data(), m.sort_depth.data(), frame_counters);
             CATGS_CUDA_CHECK_LAUNCH("preprocess");
         }

@@ -72,6 +72,7 @@ FrameStats CpuRenderer<T>::render(const Scene& scene, const Camera& camera, cons
         Window window;
         const bool speculative = options.catgs.cache == CacheMode::speculative;
         window.guard = speculative ? static_cast<T>(options.catgs.guard_px) : T(0);
+        window.guard_translation = speculative ? static_cast<T>(options.catgs.guard_translation) : T(0);
         const double near = speculative ? std::max(kMinSpeculativeNear, options.near_plane - options.catgs.guard_translation)
                                         : options.near_plane;
         window.near_plane = static_cast<T>(near);
@@ -152,15 +153,29 @@ void CpuRenderer<T>::preprocess(const Scene& scene, const View<T>& actual, const
     sort_depth_.resize(n);
     const std::size_t sh_stride = scene.sh_floats_per_gaussian();
     window_min_depth_ = std::numeric_limits<double>::infinity();
+    uncached_bound_px_ = 0;
     std::mutex min_mutex;
     parallel_for(n, kGaussianGrain, threads_, [&](std::size_t begin, std::size_t end) {
         Projected<T> poses[kMaxWindow];
-        double chunk_min = std::numeric_limits<double>::infinity();
+        double chunk_min = std::numeric_limits<double>::infinity(), chunk_bound = 0;
         for (std::size_t i = begin; i < end; ++i) {
             const std::uint32_t valid = project_window(scene, i, window, poses);
             tiles_touched_[i] =
                 for_each_window_tile<kMaxWindow>(poses, valid, w, culling, window.guard, window.views[0], [](std::uint32_t) {});
-            if (tiles_touched_[i] == 0) continue;
+            if (tiles_touched_[i] == 0) {
+                // In no list, but close enough to enter the image within the envelope (a near
+                // Gaussian just outside it moves f dt / z; a needle just outside opens up into
+                // it): the planner must bound its motion too, or a cached frame misses it.
+                T bound = T(0);
+                const float* sc = &scene.scales[3 * i];
+                if (window.guard > T(0) && culling != Culling::exact && (valid & 1u) &&
+                    uncached_can_enter(poses[0], culling, window.views[0], window.guard, window.guard_translation,
+                                       static_cast<T>(std::max({std::fabs(sc[0]), std::fabs(sc[1]), std::fabs(sc[2])})), bound)) {
+                    chunk_min = std::min(chunk_min, static_cast<double>(poses[0].depth));
+                    chunk_bound = std::max(chunk_bound, static_cast<double>(bound));
+                }
+                continue;
+            }
             // Keys sort by the depth at the first pose where the Gaussian is visible (the key
             // pose, so the key frame itself is exact); the envelope needs the nearest depth
             // at any pose.
@@ -183,6 +198,7 @@ void CpuRenderer<T>::preprocess(const Scene& scene, const View<T>& actual, const
         }
         std::lock_guard lock(min_mutex);
         window_min_depth_ = std::min(window_min_depth_, chunk_min);
+        uncached_bound_px_ = std::max(uncached_bound_px_, chunk_bound);
     });
 }
 
@@ -431,8 +447,10 @@ KeyFrameSummary CpuRenderer<T>::summarize(const Scene& scene, const Window& wind
         if (!(p.opacity > 0)) continue;
         ++visible;
         inverse_sum += 1.0 / static_cast<double>(p.depth);
-        const TileRect r = tile_rect(p, culling, key.tiles_x, key.tiles_y);
-        if (!(r.x0 == 0 && r.y0 == 0 && r.x1 == key.tiles_x && r.y1 == key.tiles_y)) {
+        // Only a Gaussian already in every list cannot gain tiles (exact culling: the one
+        // shared list). A full-grid rectangle is not enough: opacity-aware lists hold only the
+        // tiles the ellipse touches, e.g. the diagonal ones of a thin diagonal ellipse.
+        if (culling != Culling::exact && tiles_touched_[i] < static_cast<std::uint32_t>(key.tiles_x * key.tiles_y)) {
             const Vec2<T> e = footprint_extent(p, culling);
             const float* sc = &scene.scales[3 * i];
             const T bound = footprint_bound_px(p, culling, static_cast<T>(std::max({sc[0], sc[1], sc[2]})),
@@ -441,6 +459,7 @@ KeyFrameSummary CpuRenderer<T>::summarize(const Scene& scene, const Window& wind
                                         static_cast<double>(bound)});
         }
     }
+    s.max_extent_px = std::max(s.max_extent_px, uncached_bound_px_);
     s.mean_inverse_depth = visible ? inverse_sum / static_cast<double>(visible) : 0.0;
     if (!std::isfinite(s.min_depth)) s.min_depth = static_cast<double>(window.near_plane);
     s.min_depth = std::max(s.min_depth, static_cast<double>(window.near_plane));

@@ -59,6 +59,7 @@ private:
     struct Window {
         std::vector<View<T>> views;  // pose 0 is the actual (key) pose
         T guard = T(0);
+        T guard_translation = T(0);   // envelope radius in metres (speculation)
         T near_plane = T(0);          // lowered by the translation guard for speculation
     };
     void preprocess(const Scene& scene, const View<T>& actual, const Window& window, Culling culling);
@@ -81,6 +82,7 @@ private:
     FramePlanner planner_;
     std::uint32_t split_k_ = 0;                   // k of the current task list
     double window_min_depth_ = 0;
+    double uncached_bound_px_ = 0;                // preprocess: footprint bound of uncached Gaussians near the image
     std::uint64_t rendered_pairs_ = 0;            // ranges: pairs the tiles' lists hold                 // preprocess: nearest depth at any pose of the window
     std::vector<Projected<T>> projected_;         // preprocess: at the actual pose; opacity 0 = culled
     std::vector<std::uint32_t> tiles_touched_;    // preprocess: union tile count, 0 = not cached

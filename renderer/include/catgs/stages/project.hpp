@@ -66,25 +66,37 @@ CATGS_HD bool project_geometry(const GaussianRef& g, const View<T>& view, Projec
     j.m[1][1] = view.fy * inv_z;
     j.m[1][2] = -view.fy * ty * inv_z;
 
-    // Sigma' = J W Sigma W^T J^T (EWA eq. 31), plus the low-pass blur on the diagonal.
-    const Mat3<T> jw = j * view.rotation;
-    const Mat3<T> cov3 = covariance_3d<T>(g.scale, g.rotation);
-    const Mat3<T> s2 = jw * cov3 * transpose(jw);
-    const T blur = static_cast<T>(kCovarianceBlur);
-    const T cxx = s2.m[0][0] + blur, cxy = s2.m[0][1], cyy = s2.m[1][1] + blur;
-    // The determinant is formed on the covariance scaled to unit size: a Gaussian around the
-    // camera has entries ~1e20 px^2 whose plain determinant overflows float, though its
-    // conic is perfectly representable.
-    const T size = cxx > cyy ? cxx : cyy;
-    if (!(size > T(0)) || !is_finite(size)) return false;
-    const T nxx = cxx / size, nxy = cxy / size, nyy = cyy / size;
-    const T det = nxx * nyy - nxy * nxy;
-    if (!(det > T(0))) return false;
-    const T inv_det = T(1) / (det * size);
+    // Sigma' = J W Sigma W^T J^T (EWA eq. 31) plus the low-pass blur b on the diagonal, formed
+    // from the rows m0, m1 of M = J W R S as Sigma' = M M^T + b I, with
+    //   det Sigma' = |m0 x m1|^2 + b (|m0|^2 + |m1|^2) + b^2   (Binet-Cauchy),
+    // a sum of non-negative terms. cxx cyy - cxy^2 cancels catastrophically in float for a
+    // nearly rank-one Sigma' (one huge axis, a needle seen end-on: det came out <= 0, culled,
+    // or wrong by orders of magnitude), and R S S^T R^T loses the thin axes first. M is scaled
+    // by 1/k (k = its largest entry, >= 1) so that det (~k^4) cannot overflow float for a
+    // screen-filling Gaussian (the camera inside a 1e6 m one).
+    const Mat3<T> r = quat_to_matrix<T>(static_cast<T>(g.rotation[0]), static_cast<T>(g.rotation[1]),
+                                        static_cast<T>(g.rotation[2]), static_cast<T>(g.rotation[3]));
+    Mat3<T> m = j * view.rotation * r;  // rows 0 and 1 are used
+    T k = T(1);
+    for (int i = 0; i < 2; ++i)
+        for (int c = 0; c < 3; ++c) {
+            m.m[i][c] *= static_cast<T>(g.scale[c]);
+            const T a = m.m[i][c] < T(0) ? -m.m[i][c] : m.m[i][c];
+            k = a > k ? a : k;  // a NaN entry leaves k alone and makes det NaN below
+        }
+    const T inv_k = T(1) / k;
+    const Vec3<T> m0{m.m[0][0] * inv_k, m.m[0][1] * inv_k, m.m[0][2] * inv_k};
+    const Vec3<T> m1{m.m[1][0] * inv_k, m.m[1][1] * inv_k, m.m[1][2] * inv_k};
+    const Vec3<T> cross{m0.y * m1.z - m0.z * m1.y, m0.z * m1.x - m0.x * m1.z, m0.x * m1.y - m0.y * m1.x};
+    const T blur = static_cast<T>(kCovarianceBlur) * inv_k * inv_k;
+    const T sxx = dot(m0, m0) + blur, sxy = dot(m0, m1), syy = dot(m1, m1) + blur;  // Sigma' / k^2
+    const T det = dot(cross, cross) + blur * (sxx + syy - blur);                      // det Sigma' / k^4
+    if (!(det > T(0)) || !is_finite(det)) return false;
+    const T inv_det = inv_k * inv_k / det;  // k^2 / det Sigma'
 
     out.mean = {view.fx * pc.x * inv_z + view.cx, view.fy * pc.y * inv_z + view.cy};
-    out.conic = {nyy * inv_det, -nxy * inv_det, nxx * inv_det};
-    out.cov = {cxx, cxy, cyy};
+    out.conic = {syy * inv_det, -sxy * inv_det, sxx * inv_det};
+    out.cov = {sxx * k * k, sxy * k * k, syy * k * k};  // may overflow to inf: extents only
     out.depth = pc.z;
     out.opacity = static_cast<T>(g.opacity);
     return is_finite(out.mean.x) && is_finite(out.mean.y) && is_finite(out.conic.x) && is_finite(out.conic.y) &&

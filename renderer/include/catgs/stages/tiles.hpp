@@ -84,6 +84,33 @@ CATGS_HD T footprint_bound_px(const Projected<T>& g, Culling mode, T max_scale, 
     return sigmas * (focal * max_scale / g.depth + sqrt_of(static_cast<T>(kCovarianceBlur)));
 }
 
+/// Speculative cache: can a Gaussian that is in no list at the key pose `key` (projected there
+/// as `g`) enter the image at a pose the envelope accepts? Such a pose turns the view by at
+/// most `guard` pixels and moves the camera by at most `guard_translation` metres, so the mean
+/// moves by at most guard + f kappa dt / z (first order, inside the Jacobian clamp region) and
+/// the footprint grows by at most b (dt / z + guard / f) towards footprint_bound_px b. When it
+/// can, the planner must bound its motion too: `bound` receives b.
+template <typename T>
+CATGS_HD bool uncached_can_enter(const Projected<T>& g, Culling mode, const View<T>& key, T guard, T guard_translation,
+                                 T max_scale, T& bound) {
+    const T focal = key.fx > key.fy ? key.fx : key.fy;
+    T tangent = key.clamp_left > key.clamp_right ? key.clamp_left : key.clamp_right;
+    tangent = key.clamp_top > tangent ? key.clamp_top : tangent;
+    tangent = key.clamp_bottom > tangent ? key.clamp_bottom : tangent;
+    const T kappa = T(1) + tangent * tangent;
+    const T w = static_cast<T>(key.width), h = static_cast<T>(key.height), z = g.depth;
+    // Beyond the clamp region (the image plus 15% of its size per side) a point is too far
+    // off-axis to come in within the envelope, and first order no longer holds.
+    if (!(g.mean.x >= T(-0.15) * w && g.mean.x <= T(1.15) * w && g.mean.y >= T(-0.15) * h && g.mean.y <= T(1.15) * h))
+        return false;
+    bound = footprint_bound_px(g, mode, max_scale, focal);
+    const T reach = guard * (T(1) + bound / focal) + focal * kappa * guard_translation / z + bound * (T(1) + guard_translation / z);
+    T away = -g.mean.x > g.mean.x - w ? -g.mean.x : g.mean.x - w;
+    away = -g.mean.y > away ? -g.mean.y : away;
+    away = g.mean.y - h > away ? g.mean.y - h : away;
+    return away <= reach;
+}
+
 /// Tile rectangle of a Gaussian under a culling mode (exact mode: the whole grid), with the
 /// footprint dilated by `guard` pixels (speculative windows; 0 for a single frame).
 template <typename T>
