@@ -4,6 +4,7 @@
 #include <cuda/functional>
 #include <cub/device/device_radix_sort.cuh>
 #include <cub/device/device_scan.cuh>
+#include <cub/device/device_select.cuh>
 
 #include <algorithm>
 #include <cmath>
@@ -12,6 +13,7 @@
 #include <vector>
 
 #include "catgs/stages/blend.hpp"
+#include "catgs/stages/chunks.hpp"
 #include "catgs/stages/project.hpp"
 #include "catgs/stages/split.hpp"
 #include "catgs/stages/tiles.hpp"
@@ -45,12 +47,15 @@ struct DeviceSceneView {
     std::uint64_t count;
 };
 
-/// What the rasterizer reads of one Gaussian, staged in shared memory.
+/// What the rasterizer reads of one Gaussian, staged in shared memory. min_power lets a
+/// pixel skip the exp where alpha cannot reach 1/255 (most pixels of a tile lie outside a
+/// Gaussian's 1/255 ellipse): one log per pair when staged instead of an exp per pixel.
 template <typename T>
 struct Splat {
     Vec2<T> mean;
     Vec3<T> conic;
     T opacity;
+    T min_power;
     Vec3<T> colour;
 };
 
@@ -92,6 +97,32 @@ int bit_width(std::uint64_t v) {
 
 unsigned blocks_for(std::uint64_t n, int threads) { return static_cast<unsigned>((n + threads - 1) / threads); }
 
+/// A key frame's compacted index space: slot p belongs to chunk selected[p / kChunkGaussians],
+/// so only the chunks that survived chunk culling are preprocessed, scanned and emitted.
+/// Per-slot buffers (tile counts, sort depths, offsets) are indexed by slot; the projected
+/// Gaussians and the pairs' values by Gaussian index. Slots past a short chunk's end are
+/// empty (a count of 0).
+struct ChunkSpace {
+    const Chunk* chunks;
+    const std::uint32_t* selected;
+    std::uint64_t slots;
+
+    /// The Gaussian of slot p, or false for an empty slot.
+    __device__ bool gaussian(std::uint64_t p, std::uint64_t& i) const {
+        const Chunk& c = chunks[selected[p / kChunkGaussians]];
+        i = c.begin + p % kChunkGaussians;
+        return i < c.end;
+    }
+};
+
+// Stage 0: flag the chunks that some pose of the window may see (stages/chunks.hpp).
+template <typename T>
+__global__ void chunk_cull_kernel(const Chunk* chunks, std::uint32_t count, const View<T>* views, int window, T guard,
+                                  T guard_translation, std::uint8_t* flags) {
+    const std::uint32_t c = blockIdx.x * blockDim.x + threadIdx.x;
+    if (c < count) flags[c] = chunk_in_window(chunks[c], views, window, guard, guard_translation) ? 1 : 0;
+}
+
 __device__ GaussianRef gaussian_ref(const DeviceSceneView& scene, std::uint64_t i) {
     const std::size_t sh_stride = 3u * static_cast<std::size_t>(sh_coefficient_count(scene.sh_degree));
     return GaussianRef{scene.positions + 3 * i, scene.scales + 3 * i, scene.rotations + 4 * i, scene.opacities[i],
@@ -116,19 +147,23 @@ __device__ std::uint32_t project_window(const DeviceSceneView& scene, std::uint6
 // rasterizing (opacity 0 when culled there). Key frames of the cache also reduce what the
 // planner needs: nearest depth, mean inverse depth, largest footprint.
 template <typename T, int MaxWindow, bool Summarize>
-__global__ void preprocess_kernel(DeviceSceneView scene, const View<T>* views, int window, View<T> actual, bool reproject_actual,
-                      Culling culling, T guard, T guard_translation, Projected<T>* projected, std::uint64_t* touched,
-                      float* sort_depth, FrameCounters* counters) {
-    const std::uint64_t i = static_cast<std::uint64_t>(blockIdx.x) * blockDim.x + threadIdx.x;
+__global__ void preprocess_kernel(DeviceSceneView scene, ChunkSpace space, const View<T>* views, int window, View<T> actual,
+                                  bool reproject_actual, Culling culling, T guard, T guard_translation,
+                                  Projected<T>* projected, std::uint64_t* touched, float* sort_depth,
+                                  FrameCounters* counters) {
+    const std::uint64_t slot = static_cast<std::uint64_t>(blockIdx.x) * blockDim.x + threadIdx.x;
     bool visible = false;
     float nearest = INFINITY, extent = 0.0f;
     double inverse_depth = 0.0;
-    if (i < scene.count) {
+    std::uint64_t i = 0;
+    const bool present = slot < space.slots && space.gaussian(slot, i);
+    if (slot < space.slots && !present) touched[slot] = 0;
+    if (present) {
         Projected<T> poses[MaxWindow];
         const std::uint32_t valid = project_window<T, MaxWindow>(scene, i, views, window, poses);
         const std::uint32_t tiles =
             for_each_window_tile<MaxWindow>(poses, valid, window, culling, guard, views[0], [](std::uint32_t) {});
-        touched[i] = tiles;
+        touched[slot] = tiles;
         if (Summarize && tiles == 0 && guard > T(0) && culling != Culling::exact && (valid & 1u)) {
             // As CpuRenderer::preprocess: in no list, but able to enter the image within the envelope.
             const float* sc = gaussian_ref(scene, i).scale;
@@ -140,7 +175,7 @@ __global__ void preprocess_kernel(DeviceSceneView scene, const View<T>* views, i
             }
         }
         if (tiles > 0) {
-            sort_depth[i] = static_cast<float>(poses[first_valid_pose(valid)].depth);
+            sort_depth[slot] = static_cast<float>(poses[first_valid_pose(valid)].depth);
             // At the actual pose: pose 0's geometry unless the window lowered the near plane;
             // the SH colour only now that the Gaussian is known to touch a tile.
             const GaussianRef g = gaussian_ref(scene, i);
@@ -199,26 +234,30 @@ __global__ void preprocess_kernel(DeviceSceneView scene, const View<T>* views, i
 
 // Count within a band of tile rows (overflow path only), through the same predicate.
 template <typename T>
-__global__ void count_band_kernel(std::uint64_t n, const Projected<T>* projected, const std::uint64_t* visible,
+__global__ void count_band_kernel(ChunkSpace space, const Projected<T>* projected, const std::uint64_t* visible,
                                   View<T> view, Culling culling, TileRows rows, std::uint64_t* touched) {
-    const std::uint64_t i = static_cast<std::uint64_t>(blockIdx.x) * blockDim.x + threadIdx.x;
-    if (i >= n) return;
-    touched[i] = visible[i] == 0 ? 0 : for_each_touched_tile(projected[i], culling, view, [](std::uint32_t) {}, rows);
+    const std::uint64_t slot = static_cast<std::uint64_t>(blockIdx.x) * blockDim.x + threadIdx.x;
+    if (slot >= space.slots) return;
+    std::uint64_t i = 0;
+    touched[slot] = visible[slot] == 0 || !space.gaussian(slot, i)
+                        ? 0
+                        : for_each_touched_tile(projected[i], culling, view, [](std::uint32_t) {}, rows);
 }
 
 // Stage 3: keys at each Gaussian's offset, in Gaussian order, so that the stable sort keeps
 // index order for equal depths. `capacity` bounds every write.
 template <typename T, int MaxWindow>
 __global__ void __launch_bounds__(kThreads)
-    emit_kernel(DeviceSceneView scene, const View<T>* views, int window, Culling culling, T guard,
+    emit_kernel(DeviceSceneView scene, ChunkSpace space, const View<T>* views, int window, Culling culling, T guard,
                 const Projected<T>* projected, const std::uint64_t* touched, const std::uint64_t* offsets,
                 const float* sort_depth, TileRows rows, bool band, bool reprojected, std::uint64_t capacity,
                 std::uint64_t* keys, std::uint32_t* values) {
-    const std::uint64_t i = static_cast<std::uint64_t>(blockIdx.x) * blockDim.x + threadIdx.x;
-    if (i >= scene.count || touched[i] == 0) return;
-    std::uint64_t slot = offsets[i];
-    const std::uint64_t end = min(slot + touched[i], capacity);
-    const float depth = sort_depth[i];
+    const std::uint64_t p = static_cast<std::uint64_t>(blockIdx.x) * blockDim.x + threadIdx.x;
+    std::uint64_t i = 0;
+    if (p >= space.slots || touched[p] == 0 || !space.gaussian(p, i)) return;
+    std::uint64_t slot = offsets[p];
+    const std::uint64_t end = min(slot + touched[p], capacity);
+    const float depth = sort_depth[p];
     auto emit = [&](std::uint32_t tile) {
         if (slot < end) {
             keys[slot] = make_sort_key(tile, depth);
@@ -238,11 +277,12 @@ __global__ void __launch_bounds__(kThreads)
 
 // Cached frame: re-project the cached Gaussians at the actual pose (opacity 0 if culled).
 template <typename T>
-__global__ void reproject_kernel(DeviceSceneView scene, View<T> actual, const std::uint64_t* touched,
+__global__ void reproject_kernel(DeviceSceneView scene, ChunkSpace space, View<T> actual, const std::uint64_t* touched,
                                  Projected<T>* projected, FrameCounters* counters) {
-    const std::uint64_t i = static_cast<std::uint64_t>(blockIdx.x) * blockDim.x + threadIdx.x;
+    const std::uint64_t p = static_cast<std::uint64_t>(blockIdx.x) * blockDim.x + threadIdx.x;
     bool visible = false;
-    if (i < scene.count && touched[i] > 0) {
+    std::uint64_t i = 0;
+    if (p < space.slots && touched[p] > 0 && space.gaussian(p, i)) {
         Projected<T> p;
         visible = project_gaussian(gaussian_ref(scene, i), actual, p);
         if (!visible) p.opacity = T(0);
@@ -386,13 +426,15 @@ __global__ void __launch_bounds__(kTilePixels)
         const std::uint64_t idx = start + rank;
         if (idx < end) {
             const Projected<T>& p = projected[values[idx]];
-            batch[rank] = Splat<T>{p.mean, p.conic, p.opacity, p.colour};
+            batch[rank] = Splat<T>{p.mean, p.conic, p.opacity, min_visible_power(p.opacity), p.colour};
         }
         __syncthreads();
         const int count = end - start < kTilePixels ? static_cast<int>(end - start) : kTilePixels;
         for (int j = 0; j < count && !acc.done; ++j) {
             const Splat<T>& s = batch[j];
-            blend_gaussian(acc, s.mean, s.conic, s.opacity, s.colour, px, py, threshold);
+            const T power = gaussian_power(s.mean, s.conic, px, py);
+            // Only rounding at alpha = 1/255 can differ from blend_gaussian's own test.
+            if (power >= s.min_power) blend_power(acc, power, s.opacity, s.colour, threshold);
         }
     }
     if (!inside) return;
@@ -430,12 +472,13 @@ enum Stage {
     kCopy, kStageCount
 };
 
-float* alloc_copy(const std::vector<float>& host, cudaStream_t stream, std::size_t& bytes) {
-    float* d = nullptr;
-    const std::size_t n = std::max<std::size_t>(host.size(), 1) * sizeof(float);
+template <typename V>
+V* alloc_copy(const std::vector<V>& host, cudaStream_t stream, std::size_t& bytes) {
+    V* d = nullptr;
+    const std::size_t n = std::max<std::size_t>(host.size(), 1) * sizeof(V);
     CATGS_CUDA_CHECK(cudaMalloc(&d, n));
     if (!host.empty())
-        CATGS_CUDA_CHECK(cudaMemcpyAsync(d, host.data(), host.size() * sizeof(float), cudaMemcpyHostToDevice, stream));
+        CATGS_CUDA_CHECK(cudaMemcpyAsync(d, host.data(), host.size() * sizeof(V), cudaMemcpyHostToDevice, stream));
     bytes += n;
     return d;
 }
@@ -462,16 +505,43 @@ DeviceScene::DeviceScene(const Scene& scene, cudaStream_t stream)
         rotations_ = alloc_copy(scene.rotations, stream, bytes_);
         opacities_ = alloc_copy(scene.opacities, stream, bytes_);
         sh_ = alloc_copy(scene.sh, stream, bytes_);
+        // An unpartitioned scene: runs of kChunkGaussians with infinite boxes, so that every
+        // frame walks one compacted index space and culls nothing.
+        partitioned_ = !scene.chunks.empty();
+        std::vector<Chunk> chunks = scene.chunks;
+        if (!partitioned_) {
+            constexpr float kInf = std::numeric_limits<float>::infinity();
+            for (std::size_t b = 0; b < count_; b += kChunkGaussians) {
+                Chunk c;
+                for (int a = 0; a < 3; ++a) {
+                    c.lo[a] = -kInf;
+                    c.hi[a] = kInf;
+                }
+                c.radius = kInf;
+                c.begin = static_cast<std::uint32_t>(b);
+                c.end = static_cast<std::uint32_t>(std::min<std::size_t>(count_, b + kChunkGaussians));
+                chunks.push_back(c);
+            }
+        }
+        chunk_count_ = static_cast<std::uint32_t>(chunks.size());
+        std::vector<std::uint32_t> ids(chunks.size());
+        for (std::size_t c = 0; c < ids.size(); ++c) ids[c] = static_cast<std::uint32_t>(c);
+        chunks_ = alloc_copy(chunks, stream, bytes_);
+        all_chunks_ = alloc_copy(ids, stream, bytes_);
         CATGS_CUDA_CHECK(cudaStreamSynchronize(stream));
     } catch (...) {
-        for (float* p : {positions_, scales_, rotations_, opacities_, sh_}) cudaFree(p);
+        free_all();
         throw;
     }
 }
 
-DeviceScene::~DeviceScene() {
+void DeviceScene::free_all() {
     for (float* p : {positions_, scales_, rotations_, opacities_, sh_}) cudaFree(p);
+    cudaFree(chunks_);
+    cudaFree(all_chunks_);
 }
+
+DeviceScene::~DeviceScene() { free_all(); }
 
 template <typename T>
 struct CudaRenderer<T>::Impl {
@@ -484,9 +554,15 @@ struct CudaRenderer<T>::Impl {
     bool cache_valid = false;           // the lists on the device belong to the current window
     std::uint64_t cached_pairs = 0;     // pairs of the cached lists
     bool cached_split = false;          // the cached task list has split tiles
+    ChunkSpace key_space{};             // the key frame's compacted index space (cached frames reuse it)
+    std::uint64_t key_chunks_culled = 0;
 
     // Arenas, one per stage buffer.
     DeviceArray<View<T>> views;            // the window's poses
+    DeviceArray<std::uint8_t> chunk_flags;  // chunk culling: 1 = some pose may see the chunk
+    DeviceArray<std::uint32_t> selected;    // chunk culling: the visible chunks, in scene order
+    DeviceArray<std::uint32_t> selected_count;
+    DeviceArray<std::uint8_t> select_temp;
     DeviceArray<Projected<T>> projected;   // preprocess: at the actual pose
     DeviceArray<std::uint64_t> visible;    // band path: full-frame tile counts
     DeviceArray<std::uint64_t> touched;    // count for the current pass, with a trailing 0
@@ -508,13 +584,15 @@ struct CudaRenderer<T>::Impl {
     DeviceArray<float> image_float;
     View<T>* host_views = nullptr;         // pinned staging of the window's poses
     std::uint64_t* host_total = nullptr;   // pinned, one read-back per pass
+    std::uint32_t* host_selected = nullptr;  // pinned, the visible chunk count of a key frame
     Counters* host_counters = nullptr;
     std::uint8_t* host_rgb8 = nullptr;     // pinned staging for copy-out
     float* host_float = nullptr;
     std::size_t host_rgb8_bytes = 0, host_float_bytes = 0;
 
     std::size_t arena_bytes() const {
-        return views.bytes() + projected.bytes() + visible.bytes() + touched.bytes() + sort_depth.bytes() +
+        return views.bytes() + chunk_flags.bytes() + selected.bytes() + selected_count.bytes() + select_temp.bytes() +
+               projected.bytes() + visible.bytes() + touched.bytes() + sort_depth.bytes() +
                counters.bytes() + offsets.bytes() + scan_temp.bytes() + keys[0].bytes() + keys[1].bytes() +
                values[0].bytes() + values[1].bytes() + emitted_keys.bytes() + emitted_values.bytes() +
                sort_temp.bytes() + range_begin.bytes() + range_end.bytes() +
@@ -572,6 +650,7 @@ CudaRenderer<T>::CudaRenderer(cudaStream_t stream, CudaLimits limits) : impl_(st
     }
     for (auto& e : impl_->events) CATGS_CUDA_CHECK(cudaEventCreate(&e));
     CATGS_CUDA_CHECK(cudaMallocHost(&impl_->host_total, sizeof(std::uint64_t)));
+    CATGS_CUDA_CHECK(cudaMallocHost(&impl_->host_selected, sizeof(std::uint32_t)));
     CATGS_CUDA_CHECK(cudaMallocHost(&impl_->host_counters, sizeof(Counters)));
     CATGS_CUDA_CHECK(cudaMallocHost(&impl_->host_views, kMaxWindow * sizeof(View<T>)));
     impl_->counters.reserve(1, impl_->stream);
@@ -584,6 +663,7 @@ CudaRenderer<T>::~CudaRenderer() {
     cudaStreamSynchronize(impl_->stream);
     for (auto& e : impl_->events) cudaEventDestroy(e);
     cudaFreeHost(impl_->host_total);
+    cudaFreeHost(impl_->host_selected);
     cudaFreeHost(impl_->host_counters);
     cudaFreeHost(impl_->host_views);
     cudaFreeHost(impl_->host_rgb8);
@@ -637,12 +717,15 @@ FrameStats CudaRenderer<T>::render(const Camera& camera, const RenderOptions& op
     stats.key_frame = plan.key;
     stats.window = plan.window;
 
-    // Arenas for this frame's per-Gaussian, per-tile and per-pixel buffers.
+    // Arenas for this frame's per-Gaussian, per-slot (chunk-compacted), per-tile and per-pixel
+    // buffers.
+    const std::uint32_t chunk_count = scene.chunk_count();
+    const std::uint64_t max_slots = static_cast<std::uint64_t>(chunk_count) * kChunkGaussians;
     m.projected.reserve(n, s);
-    m.visible.reserve(n + 1, s);
-    m.touched.reserve(n + 1, s);
-    m.sort_depth.reserve(n, s);
-    m.offsets.reserve(n + 1, s);
+    m.visible.reserve(max_slots + 1, s);
+    m.touched.reserve(max_slots + 1, s);
+    m.sort_depth.reserve(max_slots, s);
+    m.offsets.reserve(max_slots + 1, s);
     m.range_begin.reserve(tiles, s);
     m.range_end.reserve(tiles, s);
     m.split_slot.reserve(tiles, s);
@@ -717,27 +800,53 @@ FrameStats CudaRenderer<T>::render(const Camera& camera, const RenderOptions& op
             cudaMemcpyAsync(m.views.data(), m.host_views, w * sizeof(View<T>), cudaMemcpyHostToDevice, s));
         const T guard = speculative ? static_cast<T>(catgs.guard_px) : T(0);
         const T guard_translation = speculative ? static_cast<T>(catgs.guard_translation) : T(0);
-        CATGS_CUDA_CHECK(cudaMemsetAsync(m.touched.data() + n, 0, sizeof(std::uint64_t), s));
-        if (n > 0) {
-            const unsigned blocks = blocks_for(n, kThreads);
+        // Stage 0: the chunks some pose of the window may see, compacted in scene order (so
+        // that pairs are still emitted in Gaussian order); exact culling keeps them all.
+        std::uint32_t live_chunks = chunk_count;
+        const std::uint32_t* selected = scene.all_chunks();
+        if (options.chunk_culling && options.culling != Culling::exact && scene.partitioned() && chunk_count > 0) {
+            m.chunk_flags.reserve(chunk_count, s);
+            m.selected.reserve(chunk_count, s);
+            m.selected_count.reserve(1, s);
+            chunk_cull_kernel<T><<<blocks_for(chunk_count, kThreads), kThreads, 0, s>>>(
+                scene.chunks(), chunk_count, m.views.data(), w, guard, guard_translation, m.chunk_flags.data());
+            CATGS_CUDA_CHECK_LAUNCH("chunk_cull");
+            std::size_t temp_bytes = 0;
+            CATGS_CUDA_CHECK(cub::DeviceSelect::Flagged(nullptr, temp_bytes, scene.all_chunks(), m.chunk_flags.data(),
+                                                        m.selected.data(), m.selected_count.data(),
+                                                        static_cast<std::int64_t>(chunk_count), s));
+            m.select_temp.reserve(temp_bytes, s);
+            CATGS_CUDA_CHECK(cub::DeviceSelect::Flagged(m.select_temp.data(), temp_bytes, scene.all_chunks(),
+                                                        m.chunk_flags.data(), m.selected.data(), m.selected_count.data(),
+                                                        static_cast<std::int64_t>(chunk_count), s));
+            CATGS_CUDA_CHECK(cudaMemcpyAsync(m.host_selected, m.selected_count.data(), sizeof(std::uint32_t),
+                                             cudaMemcpyDeviceToHost, s));
+            CATGS_CUDA_CHECK(cudaStreamSynchronize(s));
+            live_chunks = *m.host_selected;
+            selected = m.selected.data();
+        }
+        m.key_space = ChunkSpace{scene.chunks(), selected, static_cast<std::uint64_t>(live_chunks) * kChunkGaussians};
+        m.key_chunks_culled = scene.partitioned() ? chunk_count - live_chunks : 0;
+        const std::uint64_t slots = m.key_space.slots;
+        CATGS_CUDA_CHECK(cudaMemsetAsync(m.touched.data() + slots, 0, sizeof(std::uint64_t), s));
+        if (slots > 0) {
+            const unsigned blocks = blocks_for(slots, kThreads);
             if (w == 1 && catgs.cache == CacheMode::off)
-                preprocess_kernel<T, 1, false><<<blocks, kThreads, 0, s>>>(sv, m.views.data(), 1, view, reproject_actual,
-                                                                           options.culling, guard, guard_translation, m.projected.data(),
-                                                                           m.touched.data(), m.sort_depth.data(),
-                                                                           frame_counters);
+                preprocess_kernel<T, 1, false><<<blocks, kThreads, 0, s>>>(
+                    sv, m.key_space, m.views.data(), 1, view, reproject_actual, options.culling, guard,
+                    guard_translation, m.projected.data(), m.touched.data(), m.sort_depth.data(), frame_counters);
             else if (w == 1)
-                preprocess_kernel<T, 1, true><<<blocks, kThreads, 0, s>>>(sv, m.views.data(), 1, view, reproject_actual,
-                                                                          options.culling, guard, guard_translation, m.projected.data(),
-                                                                          m.touched.data(), m.sort_depth.data(),
-                                                                          frame_counters);
+                preprocess_kernel<T, 1, true><<<blocks, kThreads, 0, s>>>(
+                    sv, m.key_space, m.views.data(), 1, view, reproject_actual, options.culling, guard,
+                    guard_translation, m.projected.data(), m.touched.data(), m.sort_depth.data(), frame_counters);
             else
                 preprocess_kernel<T, kMaxWindow, true><<<blocks, kThreads, 0, s>>>(
-                    sv, m.views.data(), w, view, reproject_actual, options.culling, guard, guard_translation, m.projected.data(),
-                    m.touched.data(), m.sort_depth.data(), frame_counters);
+                    sv, m.key_space, m.views.data(), w, view, reproject_actual, options.culling, guard,
+                    guard_translation, m.projected.data(), m.touched.data(), m.sort_depth.data(), frame_counters);
             CATGS_CUDA_CHECK_LAUNCH("preprocess");
         }
         CATGS_CUDA_CHECK(cudaEventRecord(e[kPreprocess], s));
-        total = m.scan(n);
+        total = m.scan(slots);
         CATGS_CUDA_CHECK(cudaEventRecord(e[kScan], s));
 
         // Bands: split the tile rows so each band's pairs fit the budget. The full-frame
@@ -754,7 +863,7 @@ FrameStats CudaRenderer<T>::render(const Camera& camera, const RenderOptions& op
             const int rows_per_band = (view.tiles_y + band_count - 1) / band_count;
             for (int r = 0; r < view.tiles_y; r += rows_per_band)
                 bands.push_back({r, std::min(view.tiles_y, r + rows_per_band)});
-            CATGS_CUDA_CHECK(cudaMemcpyAsync(m.visible.data(), m.touched.data(), (n + 1) * sizeof(std::uint64_t),
+            CATGS_CUDA_CHECK(cudaMemcpyAsync(m.visible.data(), m.touched.data(), (slots + 1) * sizeof(std::uint64_t),
                                              cudaMemcpyDeviceToDevice, s));
         }
         CATGS_CUDA_CHECK(cudaEventSynchronize(e[kScan]));
@@ -763,9 +872,9 @@ FrameStats CudaRenderer<T>::render(const Camera& camera, const RenderOptions& op
     } else {
         // Cached frame: re-project what the lists hold, then (by default) re-sort them by the
         // current depth; tiles, ranges and tasks stay as the key frame left them.
-        if (n > 0) {
-            reproject_kernel<T><<<blocks_for(n, kThreads), kThreads, 0, s>>>(sv, view, m.touched.data(),
-                                                                            m.projected.data(), frame_counters);
+        if (m.key_space.slots > 0) {
+            reproject_kernel<T><<<blocks_for(m.key_space.slots, kThreads), kThreads, 0, s>>>(
+                sv, m.key_space, view, m.touched.data(), m.projected.data(), frame_counters);
             CATGS_CUDA_CHECK_LAUNCH("reproject");
         }
         CATGS_CUDA_CHECK(cudaEventRecord(e[kPreprocess], s));
@@ -800,12 +909,14 @@ FrameStats CudaRenderer<T>::render(const Camera& camera, const RenderOptions& op
             cudaEvent_t pass_start = e[kScan];
             if (bands.size() > 1) {
                 CATGS_CUDA_CHECK(cudaEventRecord(e[kBandCount], s));
-                if (n > 0) {
-                    count_band_kernel<T><<<blocks_for(n, kThreads), kThreads, 0, s>>>(
-                        n, m.projected.data(), m.visible.data(), view, options.culling, rows, m.touched.data());
+                const std::uint64_t slots = m.key_space.slots;
+                if (slots > 0) {
+                    count_band_kernel<T><<<blocks_for(slots, kThreads), kThreads, 0, s>>>(
+                        m.key_space, m.projected.data(), m.visible.data(), view, options.culling, rows,
+                        m.touched.data());
                     CATGS_CUDA_CHECK_LAUNCH("count_band");
                 }
-                pass_total = m.scan(n);
+                pass_total = m.scan(slots);
                 CATGS_CUDA_CHECK(cudaEventRecord(e[kBandScan], s));
                 CATGS_CUDA_CHECK(cudaEventSynchronize(e[kBandScan]));
                 float ms = 0;
@@ -828,14 +939,15 @@ FrameStats CudaRenderer<T>::render(const Camera& camera, const RenderOptions& op
                 const bool band = bands.size() > 1;
                 const int w = static_cast<int>(plan.poses.size());
                 const T guard = catgs.cache == CacheMode::speculative ? static_cast<T>(catgs.guard_px) : T(0);
+                const unsigned emit_blocks = blocks_for(m.key_space.slots, kThreads);
                 if (w == 1)
-                    emit_kernel<T, 1><<<blocks_for(n, kThreads), kThreads, 0, s>>>(
-                        sv, m.views.data(), 1, options.culling, guard, m.projected.data(), m.touched.data(),
+                    emit_kernel<T, 1><<<emit_blocks, kThreads, 0, s>>>(
+                        sv, m.key_space, m.views.data(), 1, options.culling, guard, m.projected.data(), m.touched.data(),
                         m.offsets.data(), m.sort_depth.data(), rows, band, reproject_actual, pass_total,
                         m.keys[0].data(), m.values[0].data());
                 else
-                    emit_kernel<T, kMaxWindow><<<blocks_for(n, kThreads), kThreads, 0, s>>>(
-                        sv, m.views.data(), w, options.culling, guard, m.projected.data(), m.touched.data(),
+                    emit_kernel<T, kMaxWindow><<<emit_blocks, kThreads, 0, s>>>(
+                        sv, m.key_space, m.views.data(), w, options.culling, guard, m.projected.data(), m.touched.data(),
                         m.offsets.data(), m.sort_depth.data(), rows, band, reproject_actual, pass_total,
                         m.keys[0].data(), m.values[0].data());
                 CATGS_CUDA_CHECK_LAUNCH("emit");
@@ -966,6 +1078,8 @@ FrameStats CudaRenderer<T>::render(const Camera& camera, const RenderOptions& op
     const bool ranged = !shared_list && total > 0 && bands.size() == 1 && (plan.key || catgs.resort_cached);
     stats.pairs = ranged ? tc.rendered_pairs : total;
     stats.bands = static_cast<int>(bands.size());
+    stats.chunks = scene.partitioned() ? chunk_count : 0;
+    stats.chunks_culled = m.key_chunks_culled;
     stats.visible = c.visible;
     stats.split_k = split_used ? tc.split_k : 0;
     stats.split_tasks = split_used ? tc.extra_tasks : 0;

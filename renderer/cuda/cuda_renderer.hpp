@@ -55,11 +55,25 @@ public:
     const float* opacities() const { return opacities_; }
     const float* sh() const { return sh_; }
 
+    /// The scene's chunks (an unpartitioned scene gets runs of kChunkGaussians that are never
+    /// culled), and the list 0..chunk_count()-1 for frames that cull none.
+    const Chunk* chunks() const { return chunks_; }
+    const std::uint32_t* all_chunks() const { return all_chunks_; }
+    std::uint32_t chunk_count() const { return chunk_count_; }
+    /// Whether the chunks came from the scene (Scene::chunks) and carry real bounds.
+    bool partitioned() const { return partitioned_; }
+
 private:
+    void free_all();
+
     std::size_t count_ = 0, bytes_ = 0;
     int sh_degree_ = 0;
     std::array<double, 3> origin_{};
     float *positions_ = nullptr, *scales_ = nullptr, *rotations_ = nullptr, *opacities_ = nullptr, *sh_ = nullptr;
+    Chunk* chunks_ = nullptr;
+    std::uint32_t* all_chunks_ = nullptr;
+    std::uint32_t chunk_count_ = 0;
+    bool partitioned_ = false;
 };
 
 struct CudaLimits {

@@ -9,6 +9,7 @@
 #include "catgs/error.hpp"
 #include "catgs/parallel.hpp"
 #include "catgs/stages/blend.hpp"
+#include "catgs/stages/chunks.hpp"
 #include "catgs/stages/tiles.hpp"
 #include "catgs/stages/view.hpp"
 
@@ -58,6 +59,7 @@ template <typename T>
 FrameStats CpuRenderer<T>::render(const Scene& scene, const Camera& camera, const RenderOptions& options, ImageF& out,
                                   const FrameHints* hints) {
     validate(camera.intrinsics, "camera '" + camera.name + "'");
+    scene.check_consistent("cpu renderer: scene");
     const View<T> view = make_view<T>(camera, scene.origin, options.near_plane);
     const FramePlanner::Plan plan = planner_.next(camera, options.catgs, hints);
     FrameStats stats;
@@ -77,7 +79,7 @@ FrameStats CpuRenderer<T>::render(const Scene& scene, const Camera& camera, cons
                                         : options.near_plane;
         window.near_plane = static_cast<T>(near);
         for (const Camera& c : plan.poses) window.views.push_back(make_view<T>(c, scene.origin, near));
-        preprocess(scene, view, window, options.culling);
+        preprocess(scene, view, window, options.culling, options.chunk_culling && options.culling != Culling::exact);
         stats.preprocess_ms = elapsed_ms(t);
         t = Clock::now();
         emit_keys(scene, window, options.culling);
@@ -111,6 +113,8 @@ FrameStats CpuRenderer<T>::render(const Scene& scene, const Camera& camera, cons
     stats.tasks = tasks_.size();
     stats.split_tasks = tasks_.size() - ranges_.size();
     stats.split_k = split_k_;
+    stats.chunks = scene.chunks.size();
+    stats.chunks_culled = chunks_culled_;
     for (std::size_t i = 0; i < projected_.size(); ++i) stats.visible += tiles_touched_[i] > 0 && projected_[i].opacity > 0;
     return stats;
 }
@@ -145,7 +149,8 @@ std::uint32_t CpuRenderer<T>::project_window(const Scene& scene, std::size_t i, 
 // Stage 1: project every Gaussian at the actual pose (for rasterizing) and count the tiles of
 // the union of its footprints over the window (0 = not in any list).
 template <typename T>
-void CpuRenderer<T>::preprocess(const Scene& scene, const View<T>& actual, const Window& window, Culling culling) {
+void CpuRenderer<T>::preprocess(const Scene& scene, const View<T>& actual, const Window& window, Culling culling,
+                                bool cull_chunks) {
     const std::size_t n = scene.count();
     const int w = static_cast<int>(window.views.size());
     projected_.resize(n);
@@ -154,51 +159,67 @@ void CpuRenderer<T>::preprocess(const Scene& scene, const View<T>& actual, const
     const std::size_t sh_stride = scene.sh_floats_per_gaussian();
     window_min_depth_ = std::numeric_limits<double>::infinity();
     uncached_bound_px_ = 0;
+    // Stage 0: the runs of Gaussians to preprocess, the chunks that some pose of the window
+    // may see (an unpartitioned scene: all of it, in runs of the same size).
+    std::vector<std::pair<std::size_t, std::size_t>> runs;
+    chunks_culled_ = 0;
+    if (scene.chunks.empty()) {
+        for (std::size_t b = 0; b < n; b += kChunkGaussians) runs.push_back({b, std::min<std::size_t>(n, b + kChunkGaussians)});
+    } else {
+        for (const Chunk& c : scene.chunks) {
+            if (!cull_chunks || chunk_in_window(c, window.views.data(), w, window.guard, window.guard_translation))
+                runs.push_back({c.begin, c.end});
+            else
+                ++chunks_culled_;
+        }
+    }
     std::mutex min_mutex;
-    parallel_for(n, kGaussianGrain, threads_, [&](std::size_t begin, std::size_t end) {
+    parallel_for(runs.size(), kGaussianGrain / kChunkGaussians, threads_, [&](std::size_t first_run, std::size_t last_run) {
         Projected<T> poses[kMaxWindow];
-        double chunk_min = std::numeric_limits<double>::infinity(), chunk_bound = 0;
-        for (std::size_t i = begin; i < end; ++i) {
-            const std::uint32_t valid = project_window(scene, i, window, poses);
-            tiles_touched_[i] =
-                for_each_window_tile<kMaxWindow>(poses, valid, w, culling, window.guard, window.views[0], [](std::uint32_t) {});
-            if (tiles_touched_[i] == 0) {
-                // In no list, but close enough to enter the image within the envelope (a near
-                // Gaussian just outside it moves f dt / z; a needle just outside opens up into
-                // it): the planner must bound its motion too, or a cached frame misses it.
-                T bound = T(0);
-                const float* sc = &scene.scales[3 * i];
-                if (window.guard > T(0) && culling != Culling::exact && (valid & 1u) &&
-                    uncached_can_enter(poses[0], culling, window.views[0], window.guard, window.guard_translation,
-                                       static_cast<T>(std::max({std::fabs(sc[0]), std::fabs(sc[1]), std::fabs(sc[2])})), bound)) {
-                    chunk_min = std::min(chunk_min, static_cast<double>(poses[0].depth));
-                    chunk_bound = std::max(chunk_bound, static_cast<double>(bound));
+        double local_min = std::numeric_limits<double>::infinity(), local_bound = 0;
+        for (std::size_t run = first_run; run < last_run; ++run) {
+            for (std::size_t i = runs[run].first; i < runs[run].second; ++i) {
+                const std::uint32_t valid = project_window(scene, i, window, poses);
+                tiles_touched_[i] =
+                    for_each_window_tile<kMaxWindow>(poses, valid, w, culling, window.guard, window.views[0], [](std::uint32_t) {});
+                if (tiles_touched_[i] == 0) {
+                    // In no list, but close enough to enter the image within the envelope (a near
+                    // Gaussian just outside it moves f dt / z; a needle just outside opens up into
+                    // it): the planner must bound its motion too, or a cached frame misses it.
+                    T bound = T(0);
+                    const float* sc = &scene.scales[3 * i];
+                    if (window.guard > T(0) && culling != Culling::exact && (valid & 1u) &&
+                        uncached_can_enter(poses[0], culling, window.views[0], window.guard, window.guard_translation,
+                                           static_cast<T>(std::max({std::fabs(sc[0]), std::fabs(sc[1]), std::fabs(sc[2])})), bound)) {
+                        local_min = std::min(local_min, static_cast<double>(poses[0].depth));
+                        local_bound = std::max(local_bound, static_cast<double>(bound));
+                    }
+                    continue;
                 }
-                continue;
+                // Keys sort by the depth at the first pose where the Gaussian is visible (the key
+                // pose, so the key frame itself is exact); the envelope needs the nearest depth
+                // at any pose.
+                sort_depth_[i] = static_cast<float>(poses[first_valid_pose(valid)].depth);
+                for (int k = 0; k < w; ++k)
+                    if (valid >> k & 1u) local_min = std::min(local_min, static_cast<double>(poses[k].depth));
+                // At the actual pose: pose 0's geometry unless the window lowered the near plane;
+                // the SH colour only now that the Gaussian is known to touch a tile.
+                const GaussianRef g{&scene.positions[3 * i], &scene.scales[3 * i], &scene.rotations[4 * i],
+                                    scene.opacities[i], &scene.sh[sh_stride * i], scene.sh_degree};
+                bool at_actual = (valid & 1u) != 0;
+                if (window.near_plane != actual.near_plane)
+                    at_actual = project_geometry(g, actual, projected_[i]);
+                else
+                    projected_[i] = poses[0];
+                if (at_actual)
+                    shade_gaussian(g, actual, projected_[i]);
+                else
+                    projected_[i].opacity = T(0);
             }
-            // Keys sort by the depth at the first pose where the Gaussian is visible (the key
-            // pose, so the key frame itself is exact); the envelope needs the nearest depth
-            // at any pose.
-            sort_depth_[i] = static_cast<float>(poses[first_valid_pose(valid)].depth);
-            for (int k = 0; k < w; ++k)
-                if (valid >> k & 1u) chunk_min = std::min(chunk_min, static_cast<double>(poses[k].depth));
-            // At the actual pose: pose 0's geometry unless the window lowered the near plane;
-            // the SH colour only now that the Gaussian is known to touch a tile.
-            const GaussianRef g{&scene.positions[3 * i], &scene.scales[3 * i], &scene.rotations[4 * i],
-                                scene.opacities[i], &scene.sh[sh_stride * i], scene.sh_degree};
-            bool at_actual = (valid & 1u) != 0;
-            if (window.near_plane != actual.near_plane)
-                at_actual = project_geometry(g, actual, projected_[i]);
-            else
-                projected_[i] = poses[0];
-            if (at_actual)
-                shade_gaussian(g, actual, projected_[i]);
-            else
-                projected_[i].opacity = T(0);
         }
         std::lock_guard lock(min_mutex);
-        window_min_depth_ = std::min(window_min_depth_, chunk_min);
-        uncached_bound_px_ = std::max(uncached_bound_px_, chunk_bound);
+        window_min_depth_ = std::min(window_min_depth_, local_min);
+        uncached_bound_px_ = std::max(uncached_bound_px_, local_bound);
     });
 }
 

@@ -16,6 +16,7 @@ std::size_t Scene::bytes() const {
 }
 
 void Scene::resize(std::size_t n) {
+    chunks.clear();
     positions.resize(3 * n);
     scales.resize(3 * n);
     rotations.resize(4 * n);
@@ -52,6 +53,29 @@ void Scene::recentre() {
                 static_cast<float>((origin[a] + static_cast<double>(positions[3 * i + a])) - centre[a]);
     origin = centre;
     update_bounds();
+    update_chunk_bounds();
+}
+
+void Scene::update_chunk_bounds() {
+    constexpr float kInf = std::numeric_limits<float>::infinity();
+    for (Chunk& c : chunks) {
+        float lo[3] = {kInf, kInf, kInf}, hi[3] = {-kInf, -kInf, -kInf}, largest = 0.0f;
+        bool finite = true;
+        for (std::size_t i = c.begin; i < c.end; ++i) {
+            for (int a = 0; a < 3; ++a) {
+                const float p = positions[3 * i + a], s = std::fabs(scales[3 * i + a]);
+                finite = finite && std::isfinite(p) && std::isfinite(s);
+                lo[a] = std::min(lo[a], p);
+                hi[a] = std::max(hi[a], p);
+                largest = std::max(largest, s);
+            }
+        }
+        for (int a = 0; a < 3; ++a) {
+            c.lo[a] = finite ? lo[a] : -kInf;
+            c.hi[a] = finite ? hi[a] : kInf;
+        }
+        c.radius = finite ? static_cast<float>(kChunkSigmas * largest) : kInf;
+    }
 }
 
 void Scene::check_consistent(const std::string& what) const {
@@ -67,6 +91,17 @@ void Scene::check_consistent(const std::string& what) const {
     expect("scales", scales.size(), 3 * n);
     expect("rotations", rotations.size(), 4 * n);
     expect("sh", sh.size(), sh_floats_per_gaussian() * n);
+    std::size_t next = 0;
+    for (std::size_t c = 0; c < chunks.size(); ++c) {
+        const Chunk& k = chunks[c];
+        if (k.begin != next || k.end <= k.begin || k.end - k.begin > kChunkGaussians || k.end > n)
+            throw Error(what + ": chunk " + std::to_string(c) + " covers [" + std::to_string(k.begin) + ", " +
+                        std::to_string(k.end) + "), expected to start at " + std::to_string(next) + " with 1.." +
+                        std::to_string(kChunkGaussians) + " of the " + std::to_string(n) + " Gaussians");
+        next = k.end;
+    }
+    if (!chunks.empty() && next != n)
+        throw Error(what + ": chunks cover " + std::to_string(next) + " of the " + std::to_string(n) + " Gaussians");
 }
 
 std::string describe(const Scene& s) {

@@ -9,6 +9,7 @@
 #include <string_view>
 
 #include "catgs/builtin_city.hpp"
+#include "catgs/scene_ops.hpp"
 #include "scene_io_detail.hpp"
 
 namespace catgs {
@@ -25,7 +26,9 @@ std::string lower(std::string text) {
 
 }  // namespace
 
-Scene load_scene(const std::string& spec, const LoadOptions& options, LoadReport* report) {
+namespace {
+
+Scene open_scene(const std::string& spec, const LoadOptions& options, LoadReport* report) {
     if (spec.starts_with(kBuiltinPrefix)) {
         Scene scene = make_city(parse_city_spec(spec), options.progress);
         if (report) *report = LoadReport{.records = scene.count()};
@@ -36,6 +39,14 @@ Scene load_scene(const std::string& spec, const LoadOptions& options, LoadReport
     if (extension == ".splat") return read_splat(spec, options, report);
     io::fail(spec, "unknown scene format; expected a .ply or .splat file or builtin:city",
              extension.empty() ? "no file extension" : "extension " + io::quote(extension));
+}
+
+}  // namespace
+
+Scene load_scene(const std::string& spec, const LoadOptions& options, LoadReport* report) {
+    Scene scene = open_scene(spec, options, report);
+    if (options.chunks) partition_into_chunks(scene);
+    return scene;
 }
 
 }  // namespace catgs

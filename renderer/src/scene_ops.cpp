@@ -2,6 +2,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
+#include <limits>
 #include <vector>
 
 #include "catgs/error.hpp"
@@ -62,7 +64,119 @@ Scene replicate_grid(const Scene& scene, int nx, int ny, int up_axis) {
             }
         }
     out.update_bounds();
+    if (!scene.chunks.empty()) partition_into_chunks(out);
     return out;
+}
+
+namespace {
+
+// Spreads the low 10 bits of v to every third bit (the x, y or z lane of a 30-bit Morton code).
+std::uint32_t spread_bits(std::uint32_t v) {
+    v &= 0x3ffu;
+    v = (v | (v << 16)) & 0x030000ffu;
+    v = (v | (v << 8)) & 0x0300f00fu;
+    v = (v | (v << 4)) & 0x030c30c3u;
+    v = (v | (v << 2)) & 0x09249249u;
+    return v;
+}
+
+template <typename V>
+void permute(V& values, const std::vector<std::size_t>& order, std::size_t stride) {
+    V out(values.size());
+    for (std::size_t j = 0; j < order.size(); ++j)
+        std::copy_n(&values[stride * order[j]], stride, &out[stride * j]);
+    values.swap(out);
+}
+
+}  // namespace
+
+void partition_into_chunks(Scene& scene) {
+    const std::size_t n = scene.count();
+    // Cells of a 1024^3 grid over the finite means: 10 bits per axis.
+    constexpr int kCellBits = 10;
+    constexpr double kCells = static_cast<double>(1u << kCellBits);
+    float lo[3], hi[3];
+    for (int a = 0; a < 3; ++a) {
+        lo[a] = std::numeric_limits<float>::infinity();
+        hi[a] = -std::numeric_limits<float>::infinity();
+    }
+    auto finite_at = [&](std::size_t i) {
+        return std::isfinite(scene.positions[3 * i]) && std::isfinite(scene.positions[3 * i + 1]) &&
+               std::isfinite(scene.positions[3 * i + 2]);
+    };
+    for (std::size_t i = 0; i < n; ++i)
+        if (finite_at(i))
+            for (int a = 0; a < 3; ++a) {
+                lo[a] = std::min(lo[a], scene.positions[3 * i + a]);
+                hi[a] = std::max(hi[a], scene.positions[3 * i + a]);
+            }
+    // Key = Morton code << 32 | index: unique keys, so an unstable sort gives the stable order.
+    std::vector<std::uint64_t> keys(n);
+    for (std::size_t i = 0; i < n; ++i) {
+        std::uint64_t code = std::uint64_t{1} << 30;  // past every real code: non-finite last
+        if (finite_at(i)) {
+            std::uint32_t cell[3];
+            for (int a = 0; a < 3; ++a) {
+                const double extent = static_cast<double>(hi[a]) - lo[a];
+                const double t = extent > 0 ? (scene.positions[3 * i + a] - static_cast<double>(lo[a])) / extent : 0.0;
+                cell[a] = static_cast<std::uint32_t>(std::min(kCells - 1, std::max(0.0, t * kCells)));
+            }
+            code = spread_bits(cell[0]) | spread_bits(cell[1]) << 1 | spread_bits(cell[2]) << 2;
+        }
+        keys[i] = code << 32 | static_cast<std::uint64_t>(i);
+    }
+    std::sort(keys.begin(), keys.end());
+    std::vector<std::size_t> order(n);
+    for (std::size_t j = 0; j < n; ++j) order[j] = static_cast<std::size_t>(keys[j] & 0xffffffffu);
+    permute(scene.positions, order, 3);
+    permute(scene.scales, order, 3);
+    permute(scene.rotations, order, 4);
+    permute(scene.opacities, order, 1);
+    permute(scene.sh, order, scene.sh_floats_per_gaussian());
+    // Chunks follow the octree of the Morton codes, so that none straddles a cell boundary
+    // high up the tree (a fixed cut every kChunkGaussians would give a chunk that spans half
+    // the scene wherever the curve jumps between octants): a cell with more Gaussians than a
+    // chunk holds is split into its 8 children; consecutive children are grouped while they
+    // fit one chunk (their union stays inside the parent cell).
+    scene.chunks.clear();
+    auto code_of = [&](std::size_t j) { return keys[j] >> 32; };
+    auto emit = [&](std::size_t begin, std::size_t end) {
+        for (std::size_t b = begin; b < end; b += kChunkGaussians) {
+            Chunk c;
+            c.begin = static_cast<std::uint32_t>(b);
+            c.end = static_cast<std::uint32_t>(std::min<std::size_t>(end, b + kChunkGaussians));
+            scene.chunks.push_back(c);
+        }
+    };
+    auto split = [&](auto& self, std::size_t begin, std::size_t end, int level) -> void {
+        if (end - begin <= kChunkGaussians || level == kCellBits) {
+            emit(begin, end);  // the deepest cells (or the non-finite tail) are cut in order
+            return;
+        }
+        const int shift = 3 * (kCellBits - 1 - level);
+        std::size_t group_begin = begin, child_begin = begin;
+        while (child_begin < end) {
+            const std::uint64_t child = code_of(child_begin) >> shift;
+            std::size_t child_end = child_begin;
+            while (child_end < end && code_of(child_end) >> shift == child) ++child_end;
+            if (child_end - child_begin > kChunkGaussians) {
+                if (group_begin < child_begin) emit(group_begin, child_begin);
+                self(self, child_begin, child_end, level + 1);
+                group_begin = child_end;
+            } else if (child_end - group_begin > kChunkGaussians) {
+                emit(group_begin, child_begin);
+                group_begin = child_begin;
+            }
+            child_begin = child_end;
+        }
+        if (group_begin < end) emit(group_begin, end);
+    };
+    // The non-finite tail (code 2^30) is its own run after the finite codes.
+    std::size_t finite_end = n;
+    while (finite_end > 0 && code_of(finite_end - 1) >> 30) --finite_end;
+    split(split, 0, finite_end, 0);
+    emit(finite_end, n);
+    scene.update_chunk_bounds();
 }
 
 std::pair<int, int> parse_grid(const std::string& text) {

@@ -83,7 +83,8 @@ const char* const kStageNames[kStages] = {"preprocess", "scan", "emit", "sort", 
 struct Result {
     std::string name, pipeline;
     std::vector<Series> stages = std::vector<Series>(kStages);
-    Series pairs, visible, arena, key_total, cached_total, window, splits, psnr, max_abs, over_one;
+    Series pairs, visible, chunks_culled, arena, key_total, cached_total, window, splits, psnr, max_abs, over_one;
+    std::uint64_t chunks = 0;
     nlohmann::json frames = nlohmann::json::array();
 };
 
@@ -140,6 +141,8 @@ Result run_config(catgs::Renderer& renderer, const std::vector<catgs::Camera>& c
         for (int k = 0; k < kStages; ++k) r.stages[k].values.push_back(values[k]);
         r.pairs.values.push_back(static_cast<double>(s.pairs));
         r.visible.values.push_back(static_cast<double>(s.visible));
+        r.chunks_culled.values.push_back(static_cast<double>(s.chunks_culled));
+        r.chunks = s.chunks;
         r.arena.values.push_back(static_cast<double>(s.arena_bytes));
         r.window.values.push_back(s.window);
         r.splits.values.push_back(static_cast<double>(s.split_tasks));
@@ -147,7 +150,7 @@ Result run_config(catgs::Renderer& renderer, const std::vector<catgs::Camera>& c
         nlohmann::json frame{{"frame", f},           {"key_frame", s.key_frame}, {"window", s.window},
                              {"pairs", s.pairs},     {"visible", s.visible},     {"arena_bytes", s.arena_bytes},
                              {"bands", s.bands},     {"tasks", s.tasks},         {"split_tasks", s.split_tasks},
-                             {"split_k", s.split_k}};
+                             {"split_k", s.split_k},  {"chunks", s.chunks},      {"chunks_culled", s.chunks_culled}};
         for (int k = 0; k < kStages; ++k) frame[std::string(kStageNames[k]) + "_ms"] = values[k];
         if (!references.empty() && f % static_cast<std::size_t>(o.error_every) == 0) {
             const catgs::ImageError e = catgs::compare(image, references[f / static_cast<std::size_t>(o.error_every)]);
@@ -181,6 +184,7 @@ void print_detail(const Result& r) {
     row("cached total", r.cached_total, 1.0, "%-13s %10.3f %10.3f %10.3f\n");
     row("pairs", r.pairs, 1.0, "%-13s %10.0f %10.0f %10.0f\n");
     row("visible", r.visible, 1.0, "%-13s %10.0f %10.0f %10.0f\n");
+    if (r.chunks > 0) row("chunks culled", r.chunks_culled, 1.0, "%-13s %10.0f %10.0f %10.0f\n");
     row("window", r.window, 1.0, "%-13s %10.0f %10.0f %10.0f\n");
     row("split tasks", r.splits, 1.0, "%-13s %10.0f %10.0f %10.0f\n");
     row("arena MiB", r.arena, 1.0 / 1048576.0, "%-13s %10.1f %10.1f %10.1f\n");
@@ -282,6 +286,8 @@ int run(const Options& o) {
                                {"cached_total_ms", stats_json(r.cached_total)},
                                {"pairs", stats_json(r.pairs)},
                                {"visible", stats_json(r.visible)},
+                               {"chunks", r.chunks},
+                               {"chunks_culled", stats_json(r.chunks_culled)},
                                {"window", stats_json(r.window)},
                                {"split_tasks", stats_json(r.splits)},
                                {"peak_arena_bytes", r.arena.max()},

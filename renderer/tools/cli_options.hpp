@@ -22,6 +22,7 @@ struct PipelineFlags {
     double guard_px = CatgsOptions{}.guard_px;
     double guard_m = CatgsOptions{}.guard_translation;
     std::string resort = "on";
+    std::string chunks = "on";
 };
 
 inline void add_pipeline_flags(CLI::App& app, PipelineFlags& f) {
@@ -40,6 +41,10 @@ inline void add_pipeline_flags(CLI::App& app, PipelineFlags& f) {
         ->capture_default_str();
     app.add_option("--guard-m", f.guard_m, "cache envelope radius in metres")->capture_default_str();
     app.add_option("--resort", f.resort, "re-sort cached lists by the current depth: on or off")->capture_default_str();
+    app.add_option("--chunks", f.chunks,
+                   "chunk-level culling: skip the scene's spatial chunks that no pose can see (on or off; exact "
+                   "culling never skips)")
+        ->capture_default_str();
 }
 
 /// Applies the flags to `options`; throws catgs::Error naming the flag and value.
@@ -86,6 +91,8 @@ inline void apply_pipeline_flags(const PipelineFlags& f, RenderOptions& options)
     c.guard_translation = f.guard_m;
     if (f.resort != "on" && f.resort != "off") throw Error("--resort '" + f.resort + "': expected on or off");
     c.resort_cached = f.resort == "on";
+    if (f.chunks != "on" && f.chunks != "off") throw Error("--chunks '" + f.chunks + "': expected on or off");
+    options.chunk_culling = f.chunks == "on";
 }
 
 /// A short description of the pipeline options for logs and benchmark tables.
@@ -97,6 +104,7 @@ inline std::string describe_pipeline(const RenderOptions& o) {
     if (c.cache != CacheMode::off)
         s += c.adaptive_window ? ", W adaptive" : ", W=" + std::to_string(c.window);
     if (c.cache != CacheMode::off && !c.resort_cached) s += ", depth order reused";
+    if (!o.chunk_culling) s += ", no chunk culling";
     return s;
 }
 

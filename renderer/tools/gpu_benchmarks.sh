@@ -14,7 +14,8 @@ survey='builtin:survey?altitude=75&pitch=-45&speed=8&fps=30&frames=300'
 garden="$shared/data/scenes/hq-garden/hq_garden_lod2.splat"
 garden_survey='builtin:survey?altitude=120&pitch=-45&speed=8&fps=30&frames=300'
 
-full='bbox3sigma: --culling bbox3sigma; opacity-aware: ;
+full='bbox3sigma: --culling bbox3sigma; bbox3sigma-nochunks: --culling bbox3sigma --chunks off;
+opacity-aware: ; opacity-aware-nochunks: --chunks off; catgs-nochunks: --cache speculative --split auto --chunks off;
 split-256: --split 256; split-512: --split 512; split-1024: --split 1024; split-2048: --split 2048; split-auto: --split auto;
 cache-W1: --cache speculative --window 1; cache-W2: --cache speculative --window 2; cache-W4: --cache speculative --window 4;
 cache-W8: --cache speculative --window 8; cache-W16: --cache speculative --window 16; cache-adaptive: --cache speculative;

@@ -2,6 +2,8 @@
 // Both backends read these; changing one changes the reference and the GPU alike.
 #pragma once
 
+#include <cstdint>
+
 #include "catgs/hd.hpp"
 
 namespace catgs {
@@ -60,5 +62,20 @@ inline constexpr double kBBoxSigmas = 3.0;
 /// Most poses a speculative window may hold (CaT-GS: W in 1..16); a window's validity mask
 /// is a 32-bit word.
 inline constexpr int kMaxWindow = 16;
+
+/// Chunk-level culling (stages/chunks.hpp). Gaussians per chunk: ~6000 chunks for a 6M scene
+/// (a few microseconds to test on the GPU) and a multiple of the 256-thread block, so that
+/// the blocks of the compacted index space map onto whole chunks.
+inline constexpr std::uint32_t kChunkGaussians = 1024;
+
+/// A chunk's radius counts this many standard deviations of its largest scale: no culling
+/// mode draws farther (opacity-aware stops at alpha = 1/255, sqrt(2 ln 255) = 3.33 sigma for
+/// opacity 1; bbox3sigma at 3).
+inline constexpr double kChunkSigmas = 3.34;
+
+/// Pixels of margin around the Jacobian clamp region in the chunk test: the low-pass blur
+/// widens a footprint by at most 3.34 sqrt(0.3) = 1.83 px, and footprints in the partial
+/// tiles past the right and bottom image edge (< 16 px) still join those tiles' lists.
+inline constexpr double kChunkMarginPx = 18.0;
 
 }  // namespace catgs

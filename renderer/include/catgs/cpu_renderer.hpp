@@ -62,7 +62,7 @@ private:
         T guard_translation = T(0);   // envelope radius in metres (speculation)
         T near_plane = T(0);          // lowered by the translation guard for speculation
     };
-    void preprocess(const Scene& scene, const View<T>& actual, const Window& window, Culling culling);
+    void preprocess(const Scene& scene, const View<T>& actual, const Window& window, Culling culling, bool cull_chunks);
     void reproject(const Scene& scene, const View<T>& actual);
     void emit_keys(const Scene& scene, const Window& window, Culling culling);
     void sort_pairs(const View<T>& view);
@@ -81,6 +81,7 @@ private:
     int threads_;
     FramePlanner planner_;
     std::uint32_t split_k_ = 0;                   // k of the current task list
+    std::uint64_t chunks_culled_ = 0;             // preprocess: chunks the key frame skipped
     double window_min_depth_ = 0;
     double uncached_bound_px_ = 0;                // preprocess: footprint bound of uncached Gaussians near the image
     std::uint64_t rendered_pairs_ = 0;            // ranges: pairs the tiles' lists hold                 // preprocess: nearest depth at any pose of the window

@@ -117,6 +117,12 @@ CATGS_INLINE T ceil_of(T v) {
 }
 #undef CATGS_MATH_NS
 
+/// |v|, keeping NaN as NaN.
+template <typename T>
+CATGS_INLINE T abs_of(T v) {
+    return v < T(0) ? -v : v;
+}
+
 template <typename T>
 CATGS_INLINE bool is_finite(T v) {
 #if defined(__CUDA_ARCH__)

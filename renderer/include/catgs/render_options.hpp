@@ -15,6 +15,9 @@ struct RenderOptions {
     Culling culling = Culling::opacity_aware;
     std::array<float, 3> background{0.0f, 0.0f, 0.0f};
     double near_plane = kDefaultNearPlane;
+    /// Skip the scene's chunks (Scene::chunks) that no pose of the frame can see, without
+    /// touching their Gaussians (stages/chunks.hpp). Exact culling, the reference, never skips.
+    bool chunk_culling = true;
     /// CaT-GS: tile task splitting, the speculative inter-frame cache and its window.
     CatgsOptions catgs;
 };
@@ -27,6 +30,8 @@ const char* culling_name(Culling culling);
 struct FrameStats {
     std::uint64_t visible = 0;  ///< Gaussians that passed preprocess
     std::uint64_t pairs = 0;    ///< tile-Gaussian pairs emitted (render length)
+    std::uint64_t chunks = 0;   ///< the scene's chunks (1 per kChunkGaussians; 0 if unpartitioned)
+    std::uint64_t chunks_culled = 0;  ///< chunks a key frame skipped whole (cached frames: the key's)
     std::uint64_t arena_bytes = 0;  ///< device memory held by the renderer's arenas (GPU)
     int bands = 1;              ///< horizontal bands the frame was rendered in (GPU overflow path)
     bool key_frame = true;      ///< false: drawn from the inter-frame cache

@@ -17,6 +17,17 @@ struct Bounds {
     std::array<double, 3> max{0, 0, 0};
 };
 
+/// A spatial chunk of the scene (chunk-level culling, stages/chunks.hpp): Gaussians
+/// [begin, end) of the scene order, the box of their means (relative to the origin; +-inf when
+/// a member is not finite, so the chunk is never culled) and its largest footprint radius,
+/// kChunkSigmas times the largest scale of any member, in metres.
+struct Chunk {
+    float lo[3] = {0, 0, 0};
+    float hi[3] = {0, 0, 0};
+    float radius = 0;
+    std::uint32_t begin = 0, end = 0;
+};
+
 /// Positions are float offsets from a double-precision origin chosen at load (the centre of
 /// the bounds): a UAV capture in UTM coordinates sits 10^6..10^7 m from the world origin,
 /// where a float has a resolution of 0.06..1 m. Every per-frame computation is relative to
@@ -32,6 +43,10 @@ struct Scene {
     std::vector<float> sh;
     int sh_degree = 0;
     Bounds bounds;  ///< world coordinates (origin included)
+    /// Contiguous chunks in scene order covering every Gaussian (partition_into_chunks), or
+    /// empty: renderers then treat the scene as one unculled run. They describe positions and
+    /// scales, so code that edits those must partition again (or clear them).
+    std::vector<Chunk> chunks;
 
     std::size_t count() const { return opacities.size(); }
     int sh_coefficients() const { return sh_coefficient_count(sh_degree); }
@@ -42,10 +57,13 @@ struct Scene {
     void resize(std::size_t n);
     /// Recomputes bounds from the positions (world = origin + position).
     void update_bounds();
+    /// Recomputes every chunk's box and radius from the positions and scales.
+    void update_chunk_bounds();
     /// Moves the origin to the centre of the bounds, re-expressing positions relative to it.
     /// Positions are rebased in double so nothing is lost beyond the final float rounding.
     void recentre();
-    /// Throws catgs::Error naming `what` if array sizes disagree with count() or the degree.
+    /// Throws catgs::Error naming `what` if array sizes disagree with count() or the degree,
+    /// or if the chunks do not cover the Gaussians in order with at most kChunkGaussians each.
     void check_consistent(const std::string& what) const;
 };
 

@@ -21,6 +21,10 @@ struct LoadOptions {
     /// Move the origin to the centre of the bounds (see Scene). Tests that need the naive
     /// absolute-float layout turn it off.
     bool recentre = true;
+    /// load_scene only: reorder the Gaussians along a Morton curve and cut them into spatial
+    /// chunks (partition_into_chunks), for chunk-level culling. The single-format readers
+    /// keep the file's order.
+    bool chunks = true;
     Progress progress;
 };
 
@@ -52,7 +56,8 @@ Scene read_splat(const std::string& path, const LoadOptions& options = {}, LoadR
 void write_ply(const Scene& scene, const std::string& path);
 
 /// Opens a scene from a path (.ply or .splat, chosen by extension) or a generator spec
-/// "builtin:city?gaussians=N&seed=S" (see builtin_city.hpp).
+/// "builtin:city?gaussians=N&seed=S" (see builtin_city.hpp), partitioned into spatial chunks
+/// unless options.chunks is off (Gaussian order then changes; see partition_into_chunks).
 Scene load_scene(const std::string& spec, const LoadOptions& options = {}, LoadReport* report = nullptr);
 
 }  // namespace catgs

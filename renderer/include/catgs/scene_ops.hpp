@@ -16,6 +16,13 @@ Bounds percentile_bounds(const Scene& scene, double low, double high);
 /// tile the plane without overlapping. Throws catgs::Error for nx or ny < 1.
 Scene replicate_grid(const Scene& scene, int nx, int ny, int up_axis);
 
+/// Reorders the Gaussians along a Morton (Z-order) curve over the bounds of their means and
+/// cuts that order into Scene::chunks of kChunkGaussians: chunks are then compact in space,
+/// so that chunk-level culling skips whole off-screen regions (stages/chunks.hpp). The order
+/// is a stable sort of the Morton codes: Gaussians in one cell keep their relative order.
+/// Gaussians with a non-finite position go last.
+void partition_into_chunks(Scene& scene);
+
 /// Parses "3x3" into (3, 3); throws catgs::Error naming the text otherwise.
 std::pair<int, int> parse_grid(const std::string& text);
 

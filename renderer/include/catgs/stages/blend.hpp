@@ -17,14 +17,24 @@ struct PixelAccumulator {
     bool done = false;
 };
 
-/// Blends one Gaussian into a pixel sampled at (px, py). Sets acc.done (and blends nothing)
-/// when this Gaussian would bring the transmittance below `min_transmittance`: graphdeco's
-/// exclusive stop. Returns acc.done.
+/// The exponent -q/2 of the Gaussian at (px, py) (paper eq. 4 with the 2D conic).
 template <typename T>
-CATGS_HD bool blend_gaussian(PixelAccumulator<T>& acc, Vec2<T> mean, Vec3<T> conic, T opacity, Vec3<T> colour, T px,
-                             T py, T min_transmittance = static_cast<T>(kMinTransmittance)) {
+CATGS_INLINE T gaussian_power(Vec2<T> mean, Vec3<T> conic, T px, T py) {
     const T dx = mean.x - px, dy = mean.y - py;
-    const T power = T(-0.5) * (conic.x * dx * dx + conic.z * dy * dy) - conic.y * dx * dy;
+    return T(-0.5) * (conic.x * dx * dx + conic.z * dy * dy) - conic.y * dx * dy;
+}
+
+/// The smallest power at which a Gaussian of this opacity reaches alpha = 1/255: below it
+/// blend_power draws nothing, so a rasterizer may skip the exp (+inf for opacity 0).
+template <typename T>
+CATGS_INLINE T min_visible_power(T opacity) {
+    return log_of(static_cast<T>(kMinAlpha) / opacity);
+}
+
+/// blend_gaussian with the power already computed.
+template <typename T>
+CATGS_HD bool blend_power(PixelAccumulator<T>& acc, T power, T opacity, Vec3<T> colour,
+                          T min_transmittance = static_cast<T>(kMinTransmittance)) {
     // Written so that NaN fails both tests: far off-screen means can make the quadratic form
     // inf - inf, and min(0.99, NaN) would otherwise draw a NaN alpha as 0.99.
     if (!(power <= T(0))) return false;
@@ -40,6 +50,15 @@ CATGS_HD bool blend_gaussian(PixelAccumulator<T>& acc, Vec2<T> mean, Vec3<T> con
     acc.colour = {acc.colour.x + colour.x * weight, acc.colour.y + colour.y * weight, acc.colour.z + colour.z * weight};
     acc.transmittance = next;
     return false;
+}
+
+/// Blends one Gaussian into a pixel sampled at (px, py). Sets acc.done (and blends nothing)
+/// when this Gaussian would bring the transmittance below `min_transmittance`: graphdeco's
+/// exclusive stop. Returns acc.done.
+template <typename T>
+CATGS_HD bool blend_gaussian(PixelAccumulator<T>& acc, Vec2<T> mean, Vec3<T> conic, T opacity, Vec3<T> colour, T px,
+                             T py, T min_transmittance = static_cast<T>(kMinTransmittance)) {
+    return blend_power(acc, gaussian_power(mean, conic, px, py), opacity, colour, min_transmittance);
 }
 
 /// Final pixel value C + T * background, before clamping.
