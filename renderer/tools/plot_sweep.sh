@@ -25,7 +25,7 @@ set terminal pngcairo size 1100,700 noenhanced
 set output "$out"
 set title "$title"
 set xlabel "median time per frame (ms)"
-set ylabel "mean PSNR against the exact reference (dB)"
+set ylabel "mean PSNR against the reference (dB)"
 set grid
 set key bottom right
 set offsets graph 0.05, graph 0.2, graph 0.05, graph 0.05
