@@ -209,6 +209,15 @@ struct StressCase {
 /// Default image of the family cases: small (CI), with a partial tile on each axis.
 inline constexpr int kCaseWidth = 72, kCaseHeight = 40;
 
+/// The camera of the family cases: the default image at `fov` degrees horizontally.
+inline Camera case_camera(double fov = 60) { return forward_camera(kCaseWidth, kCaseHeight, fov); }
+
+/// The default path without the turn. Scenes with near-plane Gaussians need it: a turning
+/// camera sweeps some of them across the plane, and one that lands within float rounding of
+/// it is drawn by one precision and culled by the other (StressNearPlane covers that boundary
+/// on its own). Scenes of equal depths need it to keep the depths equal on cached frames.
+inline std::vector<Camera> sideways_path(const Camera& start) { return short_path(start, 0.002, 0.0); }
+
 inline StressCase make_case(std::string name, Family family, Scene scene, const Camera& camera) {
     scene.update_bounds();
     StressCase c{std::move(name), family, std::move(scene), short_path(camera)};
@@ -219,33 +228,55 @@ inline void add_ordinary(Scene& s, Draw& d, int count) {
     for (int i = 0; i < count; ++i) add(s, d.ordinary());
 }
 
+/// The unit direction from the origin (the case camera's centre) to `position`.
+inline std::array<double, 3> direction_to(const std::array<float, 3>& position) {
+    const std::array<double, 3> p{position[0], position[1], position[2]};
+    const double n = std::sqrt(p[0] * p[0] + p[1] * p[1] + p[2] * p[2]);
+    return {p[0] / n, p[1] / n, p[2] / n};
+}
+
+/// What most family scenes are made of: `background` ordinary Gaussians, which the
+/// adversarial ones blend with, then `adversarial` Gaussians of the family.
+struct FamilyShape {
+    int sh_degree;
+    int background;
+    int adversarial;
+};
+
+/// A family case of that shape, seen by case_camera() on the default path. `draw_one(d,
+/// scene, i)` returns the i-th adversarial Gaussian (the scene is there for its SH layout).
+/// The draws come in a fixed order, background first, so that a seed names one scene.
+template <typename DrawOne>
+StressCase family_case(std::uint64_t seed, std::string name, Family family, FamilyShape shape, DrawOne draw_one) {
+    Draw d(seed);
+    Scene s = empty_scene(shape.sh_degree);
+    add_ordinary(s, d, shape.background);
+    for (int i = 0; i < shape.adversarial; ++i) add(s, draw_one(d, s, i));
+    return make_case(std::move(name), family, std::move(s), case_camera());
+}
+
 // --- Families -------------------------------------------------------------------------
 
 /// Scales 1e-12, 1e-20, 1e-30, 1e-45 (denormal) and 0 on one, two or three axes: the 3D
 /// covariance underflows, the 2D covariance is the 0.3 blur (a one-pixel dot) or a line.
 inline StressCase tiny_scales(std::uint64_t seed) {
-    Draw d(seed);
-    Scene s = empty_scene(3);
-    add_ordinary(s, d, 40);
     const std::vector<float> tiny{1e-12f, 1e-20f, 1e-30f, 1e-45f, 0.0f};
-    for (int i = 0; i < 60; ++i) {
+    const FamilyShape shape{.sh_degree = 3, .background = 40, .adversarial = 60};
+    return family_case(seed, "tiny scales", Family::tiny_scales, shape, [&](Draw& d, const Scene&, int) {
         Gaussian g = d.ordinary(0.5, 8.0);
         const int axes = d.integer(1, 3);
         for (int a = 0; a < axes; ++a) g.scale[static_cast<std::size_t>(d.integer(0, 2))] = d.pick(tiny);
         g.opacity = static_cast<float>(d.uniform(0.3, 1.0));
-        add(s, g);
-    }
-    return make_case("tiny scales", Family::tiny_scales, std::move(s), forward_camera(kCaseWidth, kCaseHeight, 60));
+        return g;
+    });
 }
 
 /// Scales 1e3 .. 1e6 (isotropic and mixed with ordinary axes), in front of the camera,
 /// some containing the camera: the 2D covariance reaches 1e19 px^2 (1e38 for the
 /// determinant, float's limit).
 inline StressCase huge_scales(std::uint64_t seed) {
-    Draw d(seed);
-    Scene s = empty_scene(1);
-    add_ordinary(s, d, 60);
-    for (int i = 0; i < 4; ++i) {
+    const FamilyShape shape{.sh_degree = 1, .background = 60, .adversarial = 4};
+    return family_case(seed, "huge scales", Family::huge_scales, shape, [](Draw& d, const Scene&, int) {
         Gaussian g = d.ordinary(0.3, 50.0);
         const double big = d.log_uniform(1e3, 1e6);
         if (d.chance(0.5)) {
@@ -254,19 +285,16 @@ inline StressCase huge_scales(std::uint64_t seed) {
             g.scale[static_cast<std::size_t>(d.integer(0, 2))] = static_cast<float>(big);
         }
         g.opacity = static_cast<float>(d.uniform(0.05, 0.5));  // see-through: the rest stays visible
-        add(s, g);
-    }
-    return make_case("huge scales", Family::huge_scales, std::move(s), forward_camera(kCaseWidth, kCaseHeight, 60));
+        return g;
+    });
 }
 
 /// Zero, NaN, inf, denormal and non-normalised quaternions. Rendering uses quat_to_matrix
 /// as it is (no normalisation): a zero quaternion is the identity, a quaternion k q gives
 /// I + k^2 (R(q) - I), not a rotation, and NaN/inf ones make the covariance NaN (culled).
 inline StressCase quaternions(std::uint64_t seed) {
-    Draw d(seed);
-    Scene s = empty_scene(2);
-    add_ordinary(s, d, 40);
-    for (int i = 0; i < 60; ++i) {
+    const FamilyShape shape{.sh_degree = 2, .background = 40, .adversarial = 60};
+    return family_case(seed, "quaternions", Family::quaternions, shape, [](Draw& d, const Scene&, int) {
         Gaussian g = d.ordinary(1.0, 8.0);
         g.scale = {static_cast<float>(d.log_uniform(0.02, 0.3)), static_cast<float>(d.log_uniform(0.02, 0.3)),
                    static_cast<float>(d.log_uniform(0.02, 0.3))};
@@ -281,76 +309,64 @@ inline StressCase quaternions(std::uint64_t seed) {
                 g.rotation = {k * q[0], k * q[1], k * q[2], k * q[3]};
             }
         }
-        add(s, g);
-    }
-    return make_case("quaternions", Family::quaternions, std::move(s), forward_camera(kCaseWidth, kCaseHeight, 60));
+        return g;
+    });
 }
 
 /// Opacities from logits +-100 (1.0f and the denormal 3.7e-44f), exactly 1.0f, the largest
 /// float below 1, 1/255 and its float neighbours, and 0: alpha hits the 0.99 cap, the 1/255
 /// skip and the 1e-4 transmittance stop exactly.
 inline StressCase opacities(std::uint64_t seed) {
-    Draw d(seed);
-    Scene s = empty_scene(0);
-    add_ordinary(s, d, 30);
     const float a255 = static_cast<float>(1.0 / 255.0);
     const std::vector<float> values{activated_opacity(100),        activated_opacity(-100),
                                     1.0f,                          std::nextafter(1.0f, 0.0f),
                                     a255,                          std::nextafter(a255, 0.0f),
                                     std::nextafter(a255, 1.0f),    0.0f,
                                     0.99f,                         activated_opacity(30)};
-    for (int i = 0; i < 90; ++i) {
+    const FamilyShape shape{.sh_degree = 0, .background = 30, .adversarial = 90};
+    return family_case(seed, "opacities", Family::opacities, shape, [&](Draw& d, const Scene&, int) {
         Gaussian g = d.ordinary(1.0, 10.0);
         g.opacity = d.pick(values);
-        add(s, g);
-    }
-    return make_case("opacities", Family::opacities, std::move(s), forward_camera(kCaseWidth, kCaseHeight, 60));
+        return g;
+    });
 }
 
 /// SH coefficients of magnitude 1e30 in every degree and both signs, mixed with ordinary
 /// Gaussians: colours 1e30 saturate every pixel they reach with alpha >= 1/255.
 inline StressCase huge_sh(std::uint64_t seed) {
-    Draw d(seed);
-    Scene s = empty_scene(3);
-    add_ordinary(s, d, 60);
-    for (int i = 0; i < 12; ++i) {
+    const FamilyShape shape{.sh_degree = 3, .background = 60, .adversarial = 12};
+    return family_case(seed, "huge sh", Family::huge_sh, shape, [](Draw& d, const Scene& s, int) {
         Gaussian g = d.ordinary(1.0, 10.0);
         g.sh.assign(s.sh_floats_per_gaussian(), 0.0f);
         for (int j = 0; j < 3; ++j) g.sh[static_cast<std::size_t>(j)] = g.dc[static_cast<std::size_t>(j)];
         const int hits = d.integer(1, 4);
         for (int h = 0; h < hits; ++h)
             g.sh[static_cast<std::size_t>(d.integer(0, static_cast<int>(g.sh.size()) - 1))] = d.chance(0.5) ? 1e30f : -1e30f;
-        add(s, g);
-    }
-    return make_case("huge sh", Family::huge_sh, std::move(s), forward_camera(kCaseWidth, kCaseHeight, 60));
+        return g;
+    });
 }
 
 /// SH coefficients 1e38 (near float max: a degree-3 sum can overflow float), +inf, -inf
 /// and NaN.
 inline StressCase extreme_sh(std::uint64_t seed) {
-    Draw d(seed);
-    Scene s = empty_scene(3);
-    add_ordinary(s, d, 40);
     const std::vector<float> values{1e38f, -1e38f, 3.4e38f, kInf, -kInf, kNaN};
-    for (int i = 0; i < 12; ++i) {
+    const FamilyShape shape{.sh_degree = 3, .background = 40, .adversarial = 12};
+    return family_case(seed, "extreme sh", Family::extreme_sh, shape, [&](Draw& d, const Scene& s, int) {
         Gaussian g = d.ordinary(1.0, 10.0);
         g.sh.assign(s.sh_floats_per_gaussian(), 0.0f);
         const int hits = d.integer(1, 6);
         for (int h = 0; h < hits; ++h)
             g.sh[static_cast<std::size_t>(d.integer(0, static_cast<int>(g.sh.size()) - 1))] = d.pick(values);
-        add(s, g);
-    }
-    return make_case("extreme sh", Family::extreme_sh, std::move(s), forward_camera(kCaseWidth, kCaseHeight, 60));
+        return g;
+    });
 }
 
 /// Gaussians at the camera centre, just in front of and just behind the near plane 0.2
 /// (relative offsets 1e-5 .. 1e-2, so that float and double agree on which side they are;
 /// test_stress.cpp covers the ones within an ulp separately) and behind the camera.
 inline StressCase near_plane(std::uint64_t seed) {
-    Draw d(seed);
-    Scene s = empty_scene(1);
-    add_ordinary(s, d, 40);
-    for (int i = 0; i < 60; ++i) {
+    const FamilyShape shape{.sh_degree = 1, .background = 40, .adversarial = 60};
+    StressCase c = family_case(seed, "near plane", Family::near_plane, shape, [](Draw& d, const Scene&, int i) {
         Gaussian g;
         double z = 0.2;
         switch (d.integer(0, 3)) {
@@ -366,25 +382,18 @@ inline StressCase near_plane(std::uint64_t seed) {
         g.rotation = d.unit_quaternion();
         g.opacity = static_cast<float>(d.uniform(0.1, 0.99));
         g.dc = d.colour();
-        add(s, g);
-    }
-    StressCase c = make_case("near plane", Family::near_plane, std::move(s), forward_camera(kCaseWidth, kCaseHeight, 60));
-    // A sideways translation keeps every view depth: a turning camera would sweep some of
-    // these across the plane, and one that lands within an ulp of it is drawn by one precision
-    // and culled by the other (StressNearPlane covers that boundary on its own).
-    c.path = short_path(c.path.front(), 0.002, 0.0);
+        return g;
+    });
+    c.path = sideways_path(c.path.front());
     return c;
 }
 
 /// Means exactly on the image border (x = 0, x = width, y = 0, y = height: pixel centres
 /// are at +0.5) and on tile boundaries, small and large.
 inline StressCase image_border(std::uint64_t seed) {
-    Draw d(seed);
-    Scene s = empty_scene(0);
-    add_ordinary(s, d, 30);
-    const Camera cam = forward_camera(kCaseWidth, kCaseHeight, 60);
-    const Intrinsics& k = cam.intrinsics;
-    for (int i = 0; i < 60; ++i) {
+    const Intrinsics k = case_camera().intrinsics;
+    const FamilyShape shape{.sh_degree = 0, .background = 30, .adversarial = 60};
+    return family_case(seed, "image border", Family::image_border, shape, [&](Draw& d, const Scene&, int) {
         Gaussian g = d.ordinary(1.0, 10.0);
         const double z = g.position[2];
         double u = d.uniform(0, k.width), v = d.uniform(0, k.height);
@@ -401,9 +410,8 @@ inline StressCase image_border(std::uint64_t seed) {
         g.position[1] = static_cast<float>((v - k.cy) / k.fy * z);
         const double px = d.log_uniform(0.05, 30.0);  // footprint sigma in pixels
         for (float& sc : g.scale) sc = static_cast<float>(px * z / k.fx);
-        add(s, g);
-    }
-    return make_case("image border", Family::image_border, std::move(s), cam);
+        return g;
+    });
 }
 
 /// Gaussians 10^7 m away (on screen with scales 1e4 .. 1e5, far outside the frustum, and
@@ -429,7 +437,7 @@ inline StressCase far_away(std::uint64_t seed) {
         g.position[1] = d.chance(0.5) ? 1e20f : -1e20f;
         add(s, g);
     }
-    return make_case("far away", Family::far_away, std::move(s), forward_camera(kCaseWidth, kCaseHeight, 60));
+    return make_case("far away", Family::far_away, std::move(s), case_camera());
 }
 
 /// A scene whose origin is at UTM-sized coordinates (10^6 .. 10^7 m), the camera there too
@@ -439,7 +447,7 @@ inline StressCase utm(std::uint64_t seed) {
     Scene s = empty_scene(3);
     add_ordinary(s, d, 150);
     s.origin = {d.uniform(1e6, 9e6), d.uniform(1e6, 9e6), d.uniform(0, 500)};
-    Camera cam = forward_camera(kCaseWidth, kCaseHeight, 60);
+    Camera cam = case_camera();
     const std::array<double, 3> eye{s.origin[0] + d.uniform(-0.5, 0.5), s.origin[1] + d.uniform(-0.5, 0.5),
                                     s.origin[2] + d.uniform(-0.5, 0.5)};
     const std::array<double, 3> target{s.origin[0] + d.uniform(-1, 1), s.origin[1] + d.uniform(-1, 1), s.origin[2] + 6};
@@ -451,10 +459,8 @@ inline StressCase utm(std::uint64_t seed) {
 /// the camera within one sigma), with ordinary ones behind: alpha is nearly uniform over
 /// the screen.
 inline StressCase camera_inside(std::uint64_t seed) {
-    Draw d(seed);
-    Scene s = empty_scene(1);
-    add_ordinary(s, d, 60);
-    for (int i = 0; i < 3; ++i) {
+    const FamilyShape shape{.sh_degree = 1, .background = 60, .adversarial = 3};
+    return family_case(seed, "camera inside", Family::camera_inside, shape, [](Draw& d, const Scene&, int) {
         Gaussian g;
         const double sigma = d.log_uniform(1.0, 1e3);
         g.position = {static_cast<float>(d.uniform(-0.3, 0.3)), static_cast<float>(d.uniform(-0.3, 0.3)),
@@ -464,23 +470,18 @@ inline StressCase camera_inside(std::uint64_t seed) {
         g.rotation = d.unit_quaternion();
         g.opacity = static_cast<float>(d.uniform(0.05, 0.4));
         g.dc = d.colour();
-        add(s, g);
-    }
-    return make_case("camera inside", Family::camera_inside, std::move(s), forward_camera(kCaseWidth, kCaseHeight, 60));
+        return g;
+    });
 }
 
 /// Rank-one-before-the-blur 2D covariances: scales 1e-20 x 1e-20 x 1 (the 3D determinant
 /// underflows in float), needles (thin 1e-6 .. 1e-3, long 0.1 .. 1e3) seen end-on along the
 /// ray through their mean, flat discs seen edge-on.
 inline StressCase degenerate(std::uint64_t seed) {
-    Draw d(seed);
-    Scene s = empty_scene(0);
-    add_ordinary(s, d, 30);
-    for (int i = 0; i < 40; ++i) {
+    const FamilyShape shape{.sh_degree = 0, .background = 30, .adversarial = 40};
+    return family_case(seed, "degenerate", Family::degenerate, shape, [](Draw& d, const Scene&, int) {
         Gaussian g = d.ordinary(1.0, 10.0);
-        const std::array<double, 3> p{g.position[0], g.position[1], g.position[2]};
-        const double n = std::sqrt(p[0] * p[0] + p[1] * p[1] + p[2] * p[2]);
-        const std::array<double, 3> ray{p[0] / n, p[1] / n, p[2] / n};
+        const std::array<double, 3> ray = direction_to(g.position);
         switch (d.integer(0, 2)) {
             case 0:  // 1e-20 x 1e-20 x 1, any orientation
                 g.scale = {1e-20f, 1e-20f, 1.0f};
@@ -501,19 +502,16 @@ inline StressCase degenerate(std::uint64_t seed) {
             }
         }
         g.opacity = static_cast<float>(d.uniform(0.3, 1.0));
-        add(s, g);
-    }
-    return make_case("degenerate", Family::degenerate, std::move(s), forward_camera(kCaseWidth, kCaseHeight, 60));
+        return g;
+    });
 }
 
 /// Values a loader rejects: NaN / inf positions, NaN / inf scales, NaN opacity, NaN SH.
 /// A non-finite position, scale or opacity must cull the Gaussian (draw nothing of it) in
 /// every mode; a NaN SH colour is clamped to 0: the Gaussian is drawn black.
 inline StressCase invalid(std::uint64_t seed) {
-    Draw d(seed);
-    Scene s = empty_scene(1);
-    add_ordinary(s, d, 40);
-    for (int i = 0; i < 30; ++i) {
+    const FamilyShape shape{.sh_degree = 1, .background = 40, .adversarial = 30};
+    return family_case(seed, "invalid values", Family::invalid, shape, [](Draw& d, const Scene& s, int) {
         Gaussian g = d.ordinary(1.0, 8.0);
         const float bad = d.pick(std::vector<float>{kNaN, kInf, -kInf});
         switch (d.integer(0, 3)) {
@@ -522,9 +520,8 @@ inline StressCase invalid(std::uint64_t seed) {
             case 2: g.opacity = kNaN; break;
             default: g.sh.assign(s.sh_floats_per_gaussian(), kNaN);  // colour NaN: clamped to 0 (black)
         }
-        add(s, g);
-    }
-    return make_case("invalid values", Family::invalid, std::move(s), forward_camera(kCaseWidth, kCaseHeight, 60));
+        return g;
+    });
 }
 
 /// One random adversarial Gaussian from any family (the generators above, one draw each).
@@ -586,11 +583,9 @@ inline Gaussian adversarial(Draw& d, const Intrinsics& k, int sh_degree, bool hu
             break;
         }
         case 9: {
-            const std::array<double, 3> p{g.position[0], g.position[1], g.position[2]};
-            const double n = std::sqrt(p[0] * p[0] + p[1] * p[1] + p[2] * p[2]);
             const float thin = static_cast<float>(d.log_uniform(1e-6, 1e-3));
             g.scale = {static_cast<float>(d.log_uniform(0.1, 1e3)), thin, thin};
-            g.rotation = quaternion_x_to({p[0] / n, p[1] / n, p[2] / n});
+            g.rotation = quaternion_x_to(direction_to(g.position));
             break;
         }
         case 10: g.scale = {1e-20f, 1e-20f, 1.0f}; break;
@@ -603,15 +598,13 @@ inline Gaussian adversarial(Draw& d, const Intrinsics& k, int sh_degree, bool hu
 inline StressCase mixture(std::uint64_t seed, int count = 150, bool huge_colours = false) {
     Draw d(seed);
     Scene s = empty_scene(d.integer(0, 3));
-    const Camera cam = forward_camera(kCaseWidth, kCaseHeight, 60);
+    const Camera cam = case_camera();
     for (int i = 0; i < count; ++i) add(s, adversarial(d, cam.intrinsics, s.sh_degree, huge_colours));
     StressCase c = make_case(huge_colours ? "hdr mixture" : "mixture", huge_colours ? Family::hdr_mixture : Family::mixture,
                              std::move(s), cam);
-    // Translate only: the mixture holds near-plane Gaussians (0.2 m +- 1e-4), and a turning
-    // camera sweeps some across the plane, where one that lands within float rounding of it is
-    // drawn by one precision and culled by the other (StressNearPlane covers that boundary; with
-    // colours of 1e30 such a flip is full-scale over the whole footprint).
-    c.path = short_path(c.path.front(), 0.002, 0.0);
+    // The mixture holds near-plane Gaussians (0.2 m +- 1e-4); with colours of 1e30 a flip at
+    // the plane would be full-scale over the whole footprint.
+    c.path = sideways_path(c.path.front());
     return c;
 }
 
@@ -620,7 +613,7 @@ inline StressCase field_of_view(std::uint64_t seed, double fov) {
     StressCase c = mixture(seed, 120);
     c.name = "fov " + std::to_string(static_cast<int>(fov));
     c.family = Family::field_of_view;
-    c.path = short_path(forward_camera(kCaseWidth, kCaseHeight, fov), 0.002, 0.0);  // see mixture()
+    c.path = sideways_path(case_camera(fov));  // see mixture()
     return c;
 }
 
@@ -649,10 +642,83 @@ inline StressCase ties(std::uint64_t seed) {
     s.rotations.insert(s.rotations.end(), back.rotations.begin(), back.rotations.end());
     s.opacities.insert(s.opacities.end(), back.opacities.begin(), back.opacities.end());
     s.sh.insert(s.sh.end(), back.sh.begin(), back.sh.end());
-    StressCase c = make_case("ties", Family::ties, std::move(s), forward_camera(kCaseWidth, kCaseHeight, 60));
-    // A pure translation along x keeps every view depth equal on the cached frames too.
-    c.path = short_path(c.path.front(), 0.002, 0.0);
+    StressCase c = make_case("ties", Family::ties, std::move(s), case_camera());
+    c.path = sideways_path(c.path.front());
     return c;
+}
+
+// --- Single Gaussians ------------------------------------------------------------------
+
+/// A scene of one Gaussian at `p`; with `sh_degree` > 0 every SH coefficient is `sh_value`.
+inline Scene one_gaussian(std::array<float, 3> p, std::array<float, 3> s, std::array<float, 4> q, float opacity,
+                          std::array<float, 3> dc, int sh_degree = 0, float sh_value = 0) {
+    Gaussian g;
+    g.position = p;
+    g.scale = s;
+    g.rotation = q;
+    g.opacity = opacity;
+    g.dc = dc;
+    Scene scene = empty_scene(sh_degree);
+    if (sh_degree > 0) g.sh.assign(scene.sh_floats_per_gaussian(), sh_value);
+    add(scene, g);
+    scene.update_bounds();
+    return scene;
+}
+
+// --- Cache envelope ------------------------------------------------------------------
+// Cases for the speculative cache's envelope: each backend renders the path with the cache
+// and without, and the cached frames must match (the StressBugs of test_stress.cpp). No family
+// bound applies; `family` names the closest family.
+
+/// 30 ordinary Gaussians 3 .. 12 m away and, in a 4 x 3 grid 2 .. 3 m away, alternately
+/// needles pointing at the camera and discs seen edge-on (one-pixel footprints that open up
+/// as the line of sight turns), on a 160 x 96 camera moving 5 mm a frame sideways.
+inline StressCase needles_and_discs_end_on(std::uint64_t seed) {
+    const Camera cam = forward_camera(160, 96, 60);
+    Scene scene = empty_scene(0);
+    Draw d(seed);
+    for (int i = 0; i < 30; ++i) add(scene, d.ordinary(3, 12));
+    for (int i = 0; i < 12; ++i) {
+        Gaussian g = d.ordinary();
+        const float z = 2.0f + 0.1f * static_cast<float>(i);
+        g.position = {(-0.6f + 0.4f * static_cast<float>(i % 4)) * z, (-0.3f + 0.3f * static_cast<float>(i / 4)) * z, z};
+        // Squared in float, unlike direction_to: a seed logged by earlier runs replays the same scene.
+        const double n = std::sqrt(g.position[0] * g.position[0] + g.position[1] * g.position[1] + g.position[2] * g.position[2]);
+        const std::array<double, 3> ray{g.position[0] / n, g.position[1] / n, g.position[2] / n};
+        if (i % 2 == 0) {
+            g.scale = {30.0f, 1e-3f, 1e-3f};  // needle along the line of sight
+            g.rotation = quaternion_x_to(ray);
+        } else {
+            const std::array<double, 3> normal{ray[1], -ray[0], 0};
+            const double m = std::sqrt(normal[0] * normal[0] + normal[1] * normal[1]);
+            g.scale = {1e-4f, 8.0f, 8.0f};  // disc seen edge-on
+            g.rotation = quaternion_x_to({normal[0] / m, normal[1] / m, 0});
+        }
+        g.opacity = 0.9f;
+        add(scene, g);
+    }
+    scene.update_bounds();
+    return {"needles and discs end-on", Family::degenerate, std::move(scene), short_path(cam, 0.005, 0.0, 8)};
+}
+
+/// 40 ordinary Gaussians 8 .. 12 m away and a small bright one at 0.3 m depth whose mean is
+/// 6 px right of a 72 x 40 image; the camera moves 5 cm a frame to the right, which brings the
+/// near one into the image by 10 px a frame while the far ones move less than a pixel.
+inline StressCase near_gaussian_outside_the_image(std::uint64_t seed) {
+    const Camera cam = forward_camera(72, 40, 60);
+    Scene scene = empty_scene(0);
+    Draw d(seed);
+    for (int i = 0; i < 40; ++i) add(scene, d.ordinary(8, 12));
+    Gaussian near;
+    const double z = 0.3, u = cam.intrinsics.width + 6.0, v = d.uniform(5, 35);
+    near.position = {static_cast<float>((u - cam.intrinsics.cx) / cam.intrinsics.fx * z),
+                     static_cast<float>((v - cam.intrinsics.cy) / cam.intrinsics.fy * z), static_cast<float>(z)};
+    near.scale = {0.002f, 0.002f, 0.002f};
+    near.opacity = 0.95f;
+    near.dc = {2, 2, -1};
+    add(scene, near);
+    scene.update_bounds();
+    return {"near gaussian outside the image", Family::image_border, std::move(scene), short_path(cam, 0.05, 0.0, 4)};
 }
 
 // --- Large images ---------------------------------------------------------------------

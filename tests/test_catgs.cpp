@@ -3,12 +3,12 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
-#include <set>
 
 #include "catgs/builtin_city.hpp"
 #include "catgs/cache.hpp"
 #include "catgs/cpu_renderer.hpp"
 #include "catgs/trajectory.hpp"
+#include "catgs_paths.hpp"
 #include "test_util.hpp"
 
 namespace catgs {
@@ -179,20 +179,6 @@ TEST(CatgsWindow, JitterAroundABoundaryDoesNotOscillate) {
 
 // --- Speculative cache ----------------------------------------------------------------
 
-/// Every Gaussian the full per-frame pipeline puts in a tile must be in the cached list of
-/// that tile. Returns the number of (tile, Gaussian) pairs missing.
-std::uint64_t missing_pairs(const CpuRenderer<float>& cached, const CpuRenderer<float>& full) {
-    std::uint64_t missing = 0;
-    const auto& cr = cached.tile_ranges();
-    const auto& fr = full.tile_ranges();
-    for (std::size_t t = 0; t < fr.size(); ++t) {
-        std::set<std::uint32_t> have(cached.sorted_values().begin() + static_cast<std::ptrdiff_t>(cr[t].begin),
-                                     cached.sorted_values().begin() + static_cast<std::ptrdiff_t>(cr[t].end));
-        for (std::uint64_t j = fr[t].begin; j < fr[t].end; ++j) missing += !have.count(full.sorted_values()[j]);
-    }
-    return missing;
-}
-
 struct PathResult {
     double mean_psnr = 0, worst_psnr = 1e9;
     std::uint64_t missing = 0;
@@ -217,7 +203,7 @@ PathResult run_path(const Scene& scene, const std::vector<Camera>& cameras, cons
             ++r.key_frames;
         } else {
             ++r.cached_frames;
-            r.missing += missing_pairs(cached_renderer, full_renderer);
+            r.missing += test::missing_pairs(cached_renderer, full_renderer);
         }
     }
     r.mean_psnr = sum / static_cast<double>(cameras.size());
@@ -231,56 +217,60 @@ Scene small_city(const std::string& what) {
     return make_city(p);
 }
 
+/// The image of the path tests: small enough to render every frame of a path twice.
+Intrinsics path_intrinsics() { return intrinsics_from_fov(320, 180, 70.0); }
+
+/// The speculative cache over a fixed window of 4 frames.
+RenderOptions fixed_window_cache() {
+    RenderOptions o;
+    o.catgs.cache = CacheMode::speculative;
+    o.catgs.window = 4;
+    o.catgs.adaptive_window = false;
+    return o;
+}
+
 // Without speculation, reused lists miss Gaussians that moved into new tiles: the stripe
 // artifacts of the paper's Figure 7. Speculation over the window removes them.
 TEST(CatgsCache, SpeculationRemovesTheStripeArtifacts) {
     const Scene city = small_city("stripes");
-    const auto cameras = make_trajectory("builtin:flythrough?frames=24&altitude=35&pitch=-30&speed=14", city.bounds,
-                                         intrinsics_from_fov(320, 180, 70.0));
-    RenderOptions naive;
-    naive.catgs.cache = CacheMode::unspeculated;
-    naive.catgs.window = 6;
-    naive.catgs.adaptive_window = false;
-    const PathResult bad = run_path(city, cameras, naive);
-    RenderOptions spec = naive;
-    spec.catgs.cache = CacheMode::speculative;
-    const PathResult good = run_path(city, cameras, spec);
+    const auto [bad, good] = test::run_stripes_path(city, path_intrinsics(), run_path);
     std::cout << "[unspeculated] missing pairs " << bad.missing << ", psnr mean " << bad.mean_psnr << " worst "
               << bad.worst_psnr << "; [speculative] missing " << good.missing << ", mean " << good.mean_psnr
               << " worst " << good.worst_psnr << ", cached frames " << good.cached_frames << std::endl;
     EXPECT_GT(bad.missing, 100u);
-    EXPECT_LT(bad.worst_psnr, 35.0);
+    EXPECT_LT(bad.worst_psnr, test::kStripedWorstPsnr);
     EXPECT_EQ(good.missing, 0u);
     EXPECT_GT(good.cached_frames, 8);
-    EXPECT_GE(good.worst_psnr, 40.0);
+    EXPECT_GE(good.worst_psnr, test::kWorstPsnrBar);
+}
+
+/// 30 frames at 30 fps over the centre of `b`, frame i at pose(i, cx, cy).
+template <typename PoseAt>
+std::vector<Camera> scripted_path(const Bounds& b, const Intrinsics& k, PoseAt pose) {
+    std::vector<Camera> out;
+    const double cx = 0.5 * (b.min[0] + b.max[0]), cy = 0.5 * (b.min[1] + b.max[1]);
+    for (int i = 0; i < 30; ++i) {
+        Camera c;
+        c.intrinsics = k;
+        c.pose = pose(i, cx, cy);
+        c.timestamp = i / 30.0;
+        out.push_back(c);
+    }
+    return out;
 }
 
 std::vector<Camera> altitude_change(const Bounds& b, const Intrinsics& k) {
-    std::vector<Camera> out;
-    const double cx = 0.5 * (b.min[0] + b.max[0]), cy = 0.5 * (b.min[1] + b.max[1]);
-    for (int i = 0; i < 30; ++i) {
+    return scripted_path(b, k, [](int i, double cx, double cy) {
         const double z = 40.0 + 2.0 * i;  // climbing 60 m/s at 30 fps
-        Camera c;
-        c.intrinsics = k;
-        c.pose = look_at({cx - 30 + 0.4 * i, cy - 60, z}, {cx, cy, 0}, {0, 0, 1});
-        c.timestamp = i / 30.0;
-        out.push_back(c);
-    }
-    return out;
+        return look_at({cx - 30 + 0.4 * i, cy - 60, z}, {cx, cy, 0}, {0, 0, 1});
+    });
 }
 
 std::vector<Camera> fast_turn(const Bounds& b, const Intrinsics& k) {
-    std::vector<Camera> out;
-    const double cx = 0.5 * (b.min[0] + b.max[0]), cy = 0.5 * (b.min[1] + b.max[1]);
-    for (int i = 0; i < 30; ++i) {
+    return scripted_path(b, k, [](int i, double cx, double cy) {
         const double yaw = 0.06 * i;  // 1.8 rad/s yaw while hovering at 50 m
-        Camera c;
-        c.intrinsics = k;
-        c.pose = look_at({cx, cy, 50}, {cx + 40 * std::cos(yaw), cy + 40 * std::sin(yaw), 0}, {0, 0, 1});
-        c.timestamp = i / 30.0;
-        out.push_back(c);
-    }
-    return out;
+        return look_at({cx, cy, 50}, {cx + 40 * std::cos(yaw), cy + 40 * std::sin(yaw), 0}, {0, 0, 1});
+    });
 }
 
 // The accuracy bar over several UAV paths: cached and split frames against the per-frame
@@ -288,36 +278,25 @@ std::vector<Camera> fast_turn(const Bounds& b, const Intrinsics& k) {
 // a missing Gaussian.
 TEST(CatgsCache, AccuracyBarOverUavPaths) {
     const Scene city = small_city("accuracy bar");
-    const Intrinsics k = intrinsics_from_fov(320, 180, 70.0);
-    struct Path {
-        std::string name;
-        std::vector<Camera> cameras;
-    };
-    std::vector<Path> paths = {
+    const Intrinsics k = path_intrinsics();
+    const std::vector<test::CameraPath> paths = {
         {"survey", make_trajectory("builtin:survey?frames=40&altitude=70&speed=10", city.bounds, k)},
         {"orbit", make_trajectory("builtin:orbit?frames=40&altitude=60&speed=12", city.bounds, k)},
         {"hover", make_trajectory("builtin:hover?frames=40&altitude=60", city.bounds, k)},
         {"fast turn", fast_turn(city.bounds, k)},
         {"altitude change", altitude_change(city.bounds, k)},
     };
-    // Adaptive W, and W fixed at 4 so that fast paths also run on speculated poses.
-    RenderOptions adaptive;
-    adaptive.catgs.cache = CacheMode::speculative;
-    adaptive.catgs.split_k = 64;
-    RenderOptions fixed = adaptive;
-    fixed.catgs.adaptive_window = false;
     int cached = 0;
-    for (const Path& p : paths)
-        for (const RenderOptions& o : {adaptive, fixed}) {
-            const std::string name = p.name + (o.catgs.adaptive_window ? " adaptive" : " W=4");
-            const PathResult r = run_path(city, p.cameras, o);
-            std::cout << "[" << name << "] psnr mean " << r.mean_psnr << " worst " << r.worst_psnr << ", key "
-                      << r.key_frames << " cached " << r.cached_frames << ", missing " << r.missing << std::endl;
-            EXPECT_GE(r.mean_psnr, 45.0) << name;
-            EXPECT_GE(r.worst_psnr, 40.0) << name;
-            EXPECT_EQ(r.missing, 0u) << name;
-            cached += r.cached_frames;
-        }
+    test::for_each_accuracy_bar_run(paths, [&](const test::CameraPath& p, const test::CacheRun& run) {
+        const std::string name = p.name + run.label;
+        const PathResult r = run_path(city, p.cameras, run.options);
+        std::cout << "[" << name << "] psnr mean " << r.mean_psnr << " worst " << r.worst_psnr << ", key "
+                  << r.key_frames << " cached " << r.cached_frames << ", missing " << r.missing << std::endl;
+        EXPECT_GE(r.mean_psnr, test::kMeanPsnrBar) << name;
+        EXPECT_GE(r.worst_psnr, test::kWorstPsnrBar) << name;
+        EXPECT_EQ(r.missing, 0u) << name;
+        cached += r.cached_frames;
+    });
     EXPECT_GT(cached, 150);  // the bar is met by caching, not by rendering every frame fully
 }
 
@@ -326,12 +305,8 @@ TEST(CatgsCache, AccuracyBarOverUavPaths) {
 // the re-sort must remove the difference.
 TEST(CatgsCache, DepthOrderReuseErrorIsMeasuredAndResortRemovesIt) {
     const Scene city = small_city("depth order reuse");
-    const auto cameras = make_trajectory("builtin:orbit?frames=24&altitude=60&speed=12", city.bounds,
-                                         intrinsics_from_fov(320, 180, 70.0));
-    RenderOptions reuse;
-    reuse.catgs.cache = CacheMode::speculative;
-    reuse.catgs.window = 4;
-    reuse.catgs.adaptive_window = false;
+    const auto cameras = make_trajectory("builtin:orbit?frames=24&altitude=60&speed=12", city.bounds, path_intrinsics());
+    RenderOptions reuse = fixed_window_cache();
     reuse.catgs.resort_cached = false;
     RenderOptions resort = reuse;
     resort.catgs.resort_cached = true;
@@ -348,7 +323,7 @@ TEST(CatgsCache, DepthOrderReuseErrorIsMeasuredAndResortRemovesIt) {
 
 TEST(CatgsCache, HoverUsesLongWindowsAndLeavingTheEnvelopeStartsAKeyFrame) {
     const Scene city = small_city("envelope");
-    const Intrinsics k = intrinsics_from_fov(320, 180, 70.0);
+    const Intrinsics k = path_intrinsics();
     const auto hover = make_trajectory("builtin:hover?frames=40&altitude=60", city.bounds, k);
     RenderOptions o;
     o.catgs.cache = CacheMode::speculative;
@@ -390,12 +365,8 @@ TEST(CatgsCache, HoverUsesLongWindowsAndLeavingTheEnvelopeStartsAKeyFrame) {
 
 TEST(CatgsCache, FlightPlanHintsReplacePrediction) {
     const Scene city = small_city("flight plan");
-    const auto cameras = make_trajectory("builtin:flythrough?frames=20&altitude=40&speed=20", city.bounds,
-                                         intrinsics_from_fov(320, 180, 70.0));
-    RenderOptions o;
-    o.catgs.cache = CacheMode::speculative;
-    o.catgs.window = 4;
-    o.catgs.adaptive_window = false;
+    const auto cameras = make_trajectory("builtin:flythrough?frames=20&altitude=40&speed=20", city.bounds, path_intrinsics());
+    const RenderOptions o = fixed_window_cache();
     CpuRenderer<float> renderer, full;
     ImageF a, b;
     int cached = 0;
@@ -408,7 +379,7 @@ TEST(CatgsCache, FlightPlanHintsReplacePrediction) {
         full.render(city, cameras[i], RenderOptions{}, b);
         if (!s.key_frame) {
             ++cached;
-            missing += missing_pairs(renderer, full);
+            missing += test::missing_pairs(renderer, full);
         }
     }
     EXPECT_GE(cached, 10);  // the plan is exact: three of every four frames come from the cache

@@ -4,7 +4,8 @@
 // each frame against the exact double-precision reference (CpuRenderer<double>, exact
 // culling, no split, no cache). Every render must be free of NaN/inf in its float image and
 // within the stated bounds of its case family; seeds are fresh every run (test::fresh_seed
-// prints them; CATGS_TEST_SEED replays one).
+// prints them; CATGS_TEST_SEED replays one). What the CUDA part (tests/gpu/test_cuda_stress.cpp)
+// runs the same way is in tests/stress_harness.hpp; the bounds are each backend's own.
 //
 // StressBugs holds one test per renderer bug this suite found, each described where it is.
 // Bugs 1, 2, 3b and 4 are fixed in b131577; bugs 3 and 5 are open as of 0aaf544, so those two
@@ -17,81 +18,39 @@
 #include <chrono>
 #include <cmath>
 #include <cstdlib>
-#include <cstring>
-#include <iomanip>
-#include <limits>
-#include <map>
-#include <set>
-#include <sstream>
 
 #include "catgs/cpu_renderer.hpp"
 #include "catgs/stages/blend.hpp"
 #include "catgs/stages/project.hpp"
+#include "catgs_paths.hpp"
+#include "stress_harness.hpp"
 #include "stress_scenes.hpp"
 #include "test_util.hpp"
 
 namespace catgs {
 namespace {
 
+using test::stress::Bound;
+using test::stress::Config;
 using test::stress::Family;
+using test::stress::Frame;
+using test::stress::Measured;
+using test::stress::Mode;
 using test::stress::StressCase;
+using test::stress::cache_vs_full_levels;
+using test::stress::count_nonfinite;
+using test::stress::describe;
+using test::stress::kBackground;
+using test::stress::one_gaussian;
+using test::stress::options_for;
+using test::stress::seed_note;
 namespace stress = test::stress;
 
-// --- Configurations -------------------------------------------------------------------
-
-enum class Mode { plain, split, cache };
-
-struct Config {
-    bool use_double;
-    Culling culling;
-    Mode mode;
-    std::string name() const {
-        std::string n = use_double ? "double " : "float ";
-        n += culling_name(culling);
-        if (mode == Mode::split) n += " split8";
-        if (mode == Mode::cache) n += " cache";
-        return n;
-    }
-};
+/// Log lines "[stress] ...", seeds "stress ...".
+const std::string kSuite = "stress";
 
 /// Every backend configuration except the reference itself (double, exact, plain).
-std::vector<Config> all_configs() {
-    std::vector<Config> out;
-    for (bool d : {false, true})
-        for (Culling c : {Culling::exact, Culling::bbox3sigma, Culling::opacity_aware})
-            for (Mode m : {Mode::plain, Mode::split, Mode::cache}) {
-                if (d && c == Culling::exact && m == Mode::plain) continue;
-                out.push_back({d, c, m});
-            }
-    return out;
-}
-
-/// CaT-GS split threshold of the issue: short enough that every non-trivial tile splits.
-constexpr std::uint32_t kSplitK = 8;
-/// A background with every channel away from 0 and 1, so that errors in the final
-/// transmittance show.
-constexpr std::array<float, 3> kBackground{0.1f, 0.25f, 0.4f};
-
-RenderOptions options_for(Culling culling, Mode mode) {
-    RenderOptions o;
-    o.culling = culling;
-    o.background = kBackground;
-    if (mode == Mode::split) o.catgs.split_k = kSplitK;
-    if (mode == Mode::cache) o.catgs.cache = CacheMode::speculative;
-    return o;
-}
-
-std::size_t count_nonfinite(const ImageF& image) {
-    return static_cast<std::size_t>(
-        std::count_if(image.rgb.begin(), image.rgb.end(), [](float v) { return !std::isfinite(v); }));
-}
-
-struct Frame {
-    ImageF image;
-    ImageRGB8 rgb8;
-    std::size_t nonfinite = 0;
-    FrameStats stats;
-};
+std::vector<Config> all_configs() { return stress::all_configs(/*with_double=*/true); }
 
 /// Renders frame 0 of the case's path (plain, split), or the whole path through one
 /// renderer (cache: the frames after a key frame may come from the cache).
@@ -105,7 +64,6 @@ std::vector<Frame> render_frames(const StressCase& c, Culling culling, Mode mode
         Frame f;
         f.stats = renderer.render(c.scene, c.path[k], options, f.image);
         f.rgb8 = to_rgb8(f.image);
-        f.nonfinite = count_nonfinite(f.image);
         out.push_back(std::move(f));
     }
     return out;
@@ -127,42 +85,10 @@ std::vector<Frame> reference_frames(const StressCase& c) {
     return out;
 }
 
-struct Measured {
-    int max_abs = 0;
-    double min_psnr = std::numeric_limits<double>::infinity();
-    double max_over_one = 0;  ///< largest fraction of channel values more than one level off
-    std::size_t nonfinite = 0;
-    int frames = 0, cached = 0;
-    void merge(const Measured& o) {
-        max_abs = std::max(max_abs, o.max_abs);
-        min_psnr = std::min(min_psnr, o.min_psnr);
-        max_over_one = std::max(max_over_one, o.max_over_one);
-        nonfinite += o.nonfinite;
-        frames += o.frames;
-        cached += o.cached;
-    }
-};
-
 Measured measure(const std::vector<Frame>& frames, const std::vector<Frame>& reference) {
     Measured m;
-    for (std::size_t k = 0; k < frames.size(); ++k) {
-        const ImageError e = compare(frames[k].rgb8, reference[k].rgb8);
-        m.max_abs = std::max(m.max_abs, e.max_abs);
-        m.min_psnr = std::min(m.min_psnr, e.psnr);
-        m.max_over_one = std::max(m.max_over_one, e.fraction_over_one);
-        m.nonfinite += frames[k].nonfinite;
-        ++m.frames;
-        m.cached += !frames[k].stats.key_frame;
-    }
+    for (std::size_t k = 0; k < frames.size(); ++k) m.add(frames[k], reference[k].rgb8);
     return m;
-}
-
-std::string describe(const Measured& m) {
-    std::ostringstream s;
-    s << "max " << m.max_abs << " levels, psnr " << std::fixed << std::setprecision(1) << m.min_psnr << " dB, "
-      << std::setprecision(4) << 100 * m.max_over_one << "% > 1 level, " << m.nonfinite << " non-finite, " << m.cached
-      << "/" << m.frames << " cached";
-    return s.str();
 }
 
 // --- Bounds ---------------------------------------------------------------------------
@@ -181,16 +107,8 @@ std::string describe(const Measured& m) {
 // ordinary Gaussians that moves a pixel by one level. The families below say where it can
 // move it by more.
 
-/// An error bound against the exact double reference: the largest 8-bit difference of any
-/// channel, the lowest PSNR of any frame, and the largest fraction of channel values that
-/// differ by more than one level.
-struct Bound {
-    int max_levels;
-    double min_psnr;
-    double max_over_one;
-};
-
-/// Per family, the bound of each class of configuration:
+/// Per family, the bound of each class of configuration (stress::BoundClass, lossless and
+/// bbox3sigma per precision):
 ///  - lossless: exact or opacity-aware culling, plain or with the cache. In double these only
 ///    drop pairs whose alpha is below 1/255 anyway (opacity-aware) or reuse lists that
 ///    provably hold every needed pair, re-sorted by the current depth (cache).
@@ -218,11 +136,6 @@ constexpr Bound kFloatOneLevel{1, 72.0, 0.0};
 /// Split with ordinary colours: the exclusive-stop difference (above) at a few pixels.
 /// Measured at most 2 levels, PSNR >= 70.6 dB (ties: dense lists, many 1-level moves).
 constexpr Bound kSplitFewLevels{3, 67.0, 0.0005};
-/// A cached frame against the same configuration rendered in full: identical lists in exact
-/// and opacity-aware culling (one level for the regrouped sums), but bbox3sigma lists are
-/// grown by the guard band on key frames, so a cached bbox3sigma frame draws more of the cut
-/// 3-sigma tails than the full one (measured up to 7 levels). A missing Gaussian is ~200.
-int cache_vs_full_levels(Culling culling) { return culling == Culling::bbox3sigma ? 10 : 1; }
 
 // Measured worst values over 350 seeds (three runs of 150, 100 and 100; every configuration
 // of the class; 72 x 40 images) are quoted as (max levels / PSNR / % of values more than one
@@ -332,42 +245,38 @@ FamilyBounds bounds_for(Family f) {
     return {};
 }
 
-/// The class of bound a configuration is held to (FamilyBounds).
-std::string bound_class(const Config& cfg) {
-    if (cfg.culling == Culling::bbox3sigma) return cfg.use_double ? "double bbox3sigma" : "float bbox3sigma";
-    if (cfg.mode == Mode::split) return "split";
-    return cfg.use_double ? "double lossless" : "float lossless";
+/// The class of bound a configuration is held to (FamilyBounds): split is one class for both
+/// precisions, the others are two.
+std::string class_label(const Config& cfg) {
+    const stress::BoundClass k = stress::bound_class(cfg);
+    if (k == stress::BoundClass::split) return stress::bound_class_name(k);
+    return std::string(cfg.use_double ? "double " : "float ") + stress::bound_class_name(k);
 }
 
 Bound bound_for(Family f, const Config& cfg) {
     const FamilyBounds b = bounds_for(f);
-    if (cfg.culling == Culling::bbox3sigma) return cfg.use_double ? b.double_bbox : b.float_bbox;
-    if (cfg.mode == Mode::split) return b.split;
-    return cfg.use_double ? b.double_lossless : b.float_lossless;
+    switch (stress::bound_class(cfg)) {
+        case stress::BoundClass::bbox3sigma: return cfg.use_double ? b.double_bbox : b.float_bbox;
+        case stress::BoundClass::split: return b.split;
+        case stress::BoundClass::lossless: return cfg.use_double ? b.double_lossless : b.float_lossless;
+    }
+    return {};
 }
 
 /// Runs every configuration of one case against its family's bounds. Returns the worst
 /// measurement per configuration class.
-/// `small_image`: a handful of pixels, where one value one level off already means a PSNR
-/// of 53 dB and a fraction of 33%: only the largest difference is checked.
-std::map<std::string, Measured> check_case(const StressCase& c, const std::string& note, bool small_image = false) {
+stress::Classes check_case(const StressCase& c, const std::string& note, bool small_image) {
     const std::vector<Frame> reference = reference_frames(c);
     std::size_t reference_nonfinite = 0;
-    for (const Frame& f : reference) reference_nonfinite += f.nonfinite;
+    for (const Frame& f : reference) reference_nonfinite += count_nonfinite(f.image);
     EXPECT_EQ(reference_nonfinite, 0u) << c.name << ": the double reference wrote non-finite values " << note;
-    std::map<std::string, Measured> classes;
+    stress::Classes classes;
     for (const Config& cfg : all_configs()) {
         const std::vector<Frame> frames = render_frames(c, cfg);
         const Measured m = measure(frames, reference);
-        classes[bound_class(cfg)].merge(m);
-        const Bound b = bound_for(c.family, cfg);
+        classes[class_label(cfg)].merge(m);
         const std::string what = c.name + ", " + cfg.name() + ": " + describe(m) + " " + note;
-        EXPECT_EQ(m.nonfinite, 0u) << what;
-        EXPECT_LE(m.max_abs, b.max_levels) << what;
-        if (!small_image) {
-            EXPECT_GE(m.min_psnr, b.min_psnr) << what;
-            EXPECT_LE(m.max_over_one, b.max_over_one) << what;
-        }
+        stress::expect_within(m, bound_for(c.family, cfg), small_image, what);
         for (const Frame& f : frames) {
             EXPECT_EQ(f.image.width, c.path[0].intrinsics.width) << what;
             EXPECT_EQ(f.image.rgb.size(), 3u * static_cast<std::size_t>(c.path[0].intrinsics.width) *
@@ -378,16 +287,8 @@ std::map<std::string, Measured> check_case(const StressCase& c, const std::strin
     return classes;
 }
 
-void report(const std::string& what, const std::map<std::string, Measured>& classes) {
-    for (const auto& [name, m] : classes) std::cout << "[stress] " << what << ", " << name << ": " << describe(m) << std::endl;
-}
-
-std::string seed_note(std::uint64_t seed) { return "(CATGS_TEST_SEED=" + std::to_string(seed) + ")"; }
-
 void run_family(StressCase (*make)(std::uint64_t), const std::string& what) {
-    const std::uint64_t seed = test::fresh_seed("stress " + what);
-    const StressCase c = make(seed);
-    report(c.name, check_case(c, seed_note(seed)));
+    stress::run_family(kSuite, check_case, make, what);
 }
 
 // --- Families -------------------------------------------------------------------------
@@ -409,48 +310,16 @@ TEST(StressFamilies, EqualDepthTies) { run_family(stress::ties, "ties"); }
 
 // --- Property tests over fresh seeds ----------------------------------------------------
 
-/// Mixtures per run: every adversarial kind at random in one scene; one in three with SH
-/// colours of 1e30.
-constexpr int kMixtureSeeds = 9;
-
 TEST(StressProperty, RandomAdversarialMixtures) {
-    const std::uint64_t seed = test::fresh_seed("stress mixtures");
-    std::map<std::string, Measured> worst, worst_hdr;
-    for (int k = 0; k < kMixtureSeeds; ++k) {
-        const bool hdr = k % 3 == 2;
-        const StressCase c = stress::mixture(seed + 1000003ull * static_cast<std::uint64_t>(k), 150, hdr);
-        for (const auto& [name, m] : check_case(c, seed_note(seed) + " mixture " + std::to_string(k)))
-            (hdr ? worst_hdr : worst)[name].merge(m);
-    }
-    report("mixtures", worst);
-    report("hdr mixtures", worst_hdr);
+    stress::run_cases(kSuite, "mixtures", stress::mixture_cases, check_case);
 }
 
 TEST(StressProperty, FieldOfViewFiveToHundredFiftyDegrees) {
-    const std::uint64_t seed = test::fresh_seed("stress field of view");
-    std::map<std::string, Measured> worst;
-    for (double fov : {5.0, 10.0, 30.0, 60.0, 90.0, 120.0, 150.0}) {
-        const StressCase c = stress::field_of_view(seed + static_cast<std::uint64_t>(fov), fov);
-        for (const auto& [name, m] : check_case(c, seed_note(seed) + " fov " + std::to_string(fov))) worst[name].merge(m);
-    }
-    report("fov 5..150", worst);
+    stress::run_cases(kSuite, "field of view", stress::field_of_view_cases, check_case);
 }
 
 TEST(StressProperty, TinyAndOddResolutions) {
-    const std::uint64_t seed = test::fresh_seed("stress resolutions");
-    std::map<std::string, Measured> worst;
-    for (auto [w, h] : {std::pair{1, 1}, std::pair{1, 2}, std::pair{2, 1}, std::pair{1, 37}, std::pair{45, 1},
-                        std::pair{15, 17}, std::pair{16, 16}, std::pair{17, 17}, std::pair{255, 3}, std::pair{3, 129}}) {
-        StressCase c = stress::mixture(seed + static_cast<std::uint64_t>(w * 1000 + h), 120);
-        c.path = stress::short_path(test::forward_camera(w, h, 60), 0.002, 0.0);  // see stress::mixture
-        // Square pixels and a 60 degree horizontal field: 3 x 129 sees 175 degrees vertically,
-        // so the field-of-view bounds apply; on slivers PSNR and fractions say little.
-        c.family = Family::field_of_view;
-        for (const auto& [name, m] : check_case(c, seed_note(seed) + " " + std::to_string(w) + "x" + std::to_string(h),
-                                                w * h < 256 || std::min(w, h) < 8))
-            worst[name].merge(m);
-    }
-    report("resolutions 1x1..255x3", worst);
+    stress::run_cases(kSuite, "resolutions", stress::resolution_cases, check_case);
 }
 
 // --- 8192 x 8192 ----------------------------------------------------------------------
@@ -490,16 +359,8 @@ TEST(StressResolution, Huge8192x8192WithAFewGaussians) {
         CpuRenderer<double> reference;
         ImageF ref;
         reference.render(scene, stress::crop_camera(cam, box), options_for(Culling::exact, Mode::plain), ref);
-        const ImageRGB8 ref8 = to_rgb8(ref);
-        for (int y = y0; y < y1; ++y)
-            for (int x = x0; x < x1; ++x) {
-                covered[static_cast<std::size_t>(y) * size + x] = true;
-                for (int ch = 0; ch < 3; ++ch) {
-                    const int a = quantize_8bit(image.rgb[3 * (static_cast<std::size_t>(y) * size + x) + ch]);
-                    const int b = ref8.rgb[3 * (static_cast<std::size_t>(y - y0) * (x1 - x0) + (x - x0)) + ch];
-                    worst = std::max(worst, std::abs(a - b));
-                }
-            }
+        const auto level = [&](std::size_t i) { return static_cast<int>(quantize_8bit(image.rgb[i])); };
+        worst = std::max(worst, stress::worst_in_crop(size, level, box, to_rgb8(ref), covered));
     }
     std::cout << "[stress] 8192x8192: " << boxes.size() << " crops, worst " << worst
               << " levels against the exact double reference" << std::endl;
@@ -559,20 +420,6 @@ TEST(StressTies, EqualDepthsAreInIndexOrderAndDeterministic) {
 }
 
 // --- What the renderer draws for degenerate input ----------------------------------------
-
-Scene one_gaussian(std::array<float, 3> p, std::array<float, 3> s, std::array<float, 4> q, float opacity,
-                   std::array<float, 3> dc) {
-    stress::Gaussian g;
-    g.position = p;
-    g.scale = s;
-    g.rotation = q;
-    g.opacity = opacity;
-    g.dc = dc;
-    Scene scene = stress::empty_scene(0);
-    stress::add(scene, g);
-    scene.update_bounds();
-    return scene;
-}
 
 template <typename T>
 ImageF render_one(const Scene& scene, const Camera& camera, Culling culling = Culling::exact, FrameStats* stats = nullptr) {
@@ -814,50 +661,21 @@ TEST(StressBugs, FloatKeepsAScreenFillingGaussianWhoseDeterminantOverflows) {
 // lack pairs the per-frame pipeline has (measured up to 130 levels in the degenerate family).
 // (Fixed in b131577: footprint_bound_px.)
 TEST(StressBugs, CacheEnvelopeHoldsForNeedlesAndDiscsSeenEndOn) {
-    const Camera cam = test::forward_camera(160, 96, 60);
-    Scene scene = stress::empty_scene(0);
-    stress::Draw d(test::fresh_seed("stress cache needles"));
-    for (int i = 0; i < 30; ++i) stress::add(scene, d.ordinary(3, 12));
-    for (int i = 0; i < 12; ++i) {  // a 4 x 3 grid at 2 .. 3 m, alternately needles and discs
-        stress::Gaussian g = d.ordinary();
-        const float z = 2.0f + 0.1f * static_cast<float>(i);
-        g.position = {(-0.6f + 0.4f * static_cast<float>(i % 4)) * z, (-0.3f + 0.3f * static_cast<float>(i / 4)) * z, z};
-        const double n = std::sqrt(g.position[0] * g.position[0] + g.position[1] * g.position[1] + g.position[2] * g.position[2]);
-        const std::array<double, 3> ray{g.position[0] / n, g.position[1] / n, g.position[2] / n};
-        if (i % 2 == 0) {
-            g.scale = {30.0f, 1e-3f, 1e-3f};  // needle along the line of sight
-            g.rotation = stress::quaternion_x_to(ray);
-        } else {
-            const std::array<double, 3> normal{ray[1], -ray[0], 0};
-            const double m = std::sqrt(normal[0] * normal[0] + normal[1] * normal[1]);
-            g.scale = {1e-4f, 8.0f, 8.0f};  // disc seen edge-on
-            g.rotation = stress::quaternion_x_to({normal[0] / m, normal[1] / m, 0});
-        }
-        g.opacity = 0.9f;
-        stress::add(scene, g);
-    }
-    scene.update_bounds();
-    const std::vector<Camera> path = stress::short_path(cam, 0.005, 0.0, 8);
+    const StressCase c = stress::needles_and_discs_end_on(test::fresh_seed("stress cache needles"));
     for (Culling culling : {Culling::opacity_aware, Culling::bbox3sigma}) {
         CpuRenderer<double> cached(2), full(2);
         RenderOptions o = options_for(culling, Mode::cache);
         int cached_frames = 0;
         std::uint64_t missing = 0;
         int worst = 0;
-        for (const Camera& c : path) {
+        for (const Camera& cam : c.path) {
             ImageF a, b;
-            const FrameStats s = cached.render(scene, c, o, a);
-            full.render(scene, c, options_for(culling, Mode::plain), b);
+            const FrameStats s = cached.render(c.scene, cam, o, a);
+            full.render(c.scene, cam, options_for(culling, Mode::plain), b);
             worst = std::max(worst, compare(to_rgb8(a), to_rgb8(b)).max_abs);
             if (s.key_frame) continue;
             ++cached_frames;
-            const auto& cr = cached.tile_ranges();
-            const auto& fr = full.tile_ranges();
-            for (std::size_t t = 0; t < fr.size(); ++t) {
-                std::set<std::uint32_t> have(cached.sorted_values().begin() + static_cast<std::ptrdiff_t>(cr[t].begin),
-                                             cached.sorted_values().begin() + static_cast<std::ptrdiff_t>(cr[t].end));
-                for (std::uint64_t j = fr[t].begin; j < fr[t].end; ++j) missing += !have.count(full.sorted_values()[j]);
-            }
+            missing += test::missing_pairs(cached, full);
         }
         std::cout << "[stress] cache with needles, " << culling_name(culling) << ": " << cached_frames << " cached, "
                   << missing << " missing pairs, worst " << worst << " levels" << std::endl;
@@ -876,27 +694,14 @@ TEST(StressBugs, CacheEnvelopeHoldsForNeedlesAndDiscsSeenEndOn) {
 // into it is the same hole; the degenerate family finds those: 76 levels in bbox3sigma.)
 // Open as of 0aaf544.
 TEST(StressBugs, CacheEnvelopeHoldsForANearGaussianJustOutsideTheImage) {
-    const Camera cam = test::forward_camera(72, 40, 60);
-    Scene scene = stress::empty_scene(0);
-    stress::Draw d(test::fresh_seed("stress cache near gaussian"));
-    for (int i = 0; i < 40; ++i) stress::add(scene, d.ordinary(8, 12));
-    stress::Gaussian near;
-    const double z = 0.3, u = cam.intrinsics.width + 6.0, v = d.uniform(5, 35);
-    near.position = {static_cast<float>((u - cam.intrinsics.cx) / cam.intrinsics.fx * z),
-                     static_cast<float>((v - cam.intrinsics.cy) / cam.intrinsics.fy * z), static_cast<float>(z)};
-    near.scale = {0.002f, 0.002f, 0.002f};
-    near.opacity = 0.95f;
-    near.dc = {2, 2, -1};
-    stress::add(scene, near);
-    scene.update_bounds();
-    const std::vector<Camera> path = stress::short_path(cam, 0.05, 0.0, 4);
+    const StressCase c = stress::near_gaussian_outside_the_image(test::fresh_seed("stress cache near gaussian"));
     for (Culling culling : {Culling::opacity_aware, Culling::bbox3sigma, Culling::exact}) {
         CpuRenderer<double> cached(2), full(2);
         int worst = 0, cached_frames = 0;
-        for (const Camera& c : path) {
+        for (const Camera& cam : c.path) {
             ImageF a, b;
-            cached_frames += !cached.render(scene, c, options_for(culling, Mode::cache), a).key_frame;
-            full.render(scene, c, options_for(culling, Mode::plain), b);
+            cached_frames += !cached.render(c.scene, cam, options_for(culling, Mode::cache), a).key_frame;
+            full.render(c.scene, cam, options_for(culling, Mode::plain), b);
             worst = std::max(worst, compare(to_rgb8(a), to_rgb8(b)).max_abs);
         }
         std::cout << "[stress] cache with a near Gaussian outside the image, " << culling_name(culling) << ": "
@@ -912,26 +717,16 @@ TEST(StressBugs, CacheEnvelopeHoldsForANearGaussianJustOutsideTheImage) {
 // family and configuration class, and per family and configuration: the numbers the
 // bounds above were set from.
 TEST(StressMeasure, DISABLED_MeasureBounds) {
-    const char* env = std::getenv("CATGS_STRESS_SEEDS");
-    const int seeds = env ? std::atoi(env) : 20;
-    const std::uint64_t base = test::fresh_seed("stress measure");
-    std::map<std::string, Measured> worst;
-    for (int s = 0; s < seeds; ++s) {
-        const std::uint64_t seed = base + static_cast<std::uint64_t>(s) * 7919;
-        std::vector<StressCase> cases = stress::all_families(seed);
-        for (double fov : {5.0, 20.0, 90.0, 150.0}) cases.push_back(stress::field_of_view(seed + static_cast<std::uint64_t>(fov), fov));
-        for (const StressCase& c : cases) {
-            const std::vector<Frame> reference = reference_frames(c);
-            for (const Config& cfg : all_configs()) {
-                const std::string family = stress::family_name(c.family);
-                Measured m = measure(render_frames(c, cfg), reference);
-                for (const Frame& f : reference) m.nonfinite += f.nonfinite;
-                worst[family + " " + bound_class(cfg)].merge(m);
-                worst[family + " / " + cfg.name()].merge(m);
-            }
+    stress::measure_bounds(kSuite, [](const StressCase& c, stress::Classes& worst) {
+        const std::vector<Frame> reference = reference_frames(c);
+        for (const Config& cfg : all_configs()) {
+            const std::string family = stress::family_name(c.family);
+            Measured m = measure(render_frames(c, cfg), reference);
+            for (const Frame& f : reference) m.nonfinite += count_nonfinite(f.image);
+            worst[family + " " + class_label(cfg)].merge(m);
+            worst[family + " / " + cfg.name()].merge(m);
         }
-    }
-    for (const auto& [name, m] : worst) std::cout << "[measure] " << name << ": " << describe(m) << std::endl;
+    });
 }
 
 }  // namespace

@@ -2,6 +2,7 @@
 // against the CPU reference. Skips without a CUDA device.
 #include <gtest/gtest.h>
 
+#include "../catgs_paths.hpp"
 #include "../test_util.hpp"
 #include "catgs/builtin_city.hpp"
 #include "catgs/cpu_renderer.hpp"
@@ -66,6 +67,14 @@ TEST_F(CudaCatgsTest, SplittingMatchesTheUnsplitReference) {
     EXPECT_LE(compare(g, to_rgb8(c)).max_abs, 2);
 }
 
+/// The built-in city at 200000 Gaussians: tile lists long enough to split.
+Scene gpu_city(const std::string& what) {
+    CityParams params;
+    params.gaussians = 200000;
+    params.seed = test::fresh_seed(what);
+    return make_city(params);
+}
+
 struct PathResult {
     double mean_psnr = 0, worst_psnr = 1e9;
     int cached = 0;
@@ -92,55 +101,34 @@ PathResult run_gpu_path(const Scene& scene, const std::vector<Camera>& cameras, 
 
 // The accuracy bar on the GPU: cached and split frames against the per-frame CPU render.
 TEST_F(CudaCatgsTest, CacheMeetsTheAccuracyBarOnUavPaths) {
-    CityParams params;
-    params.gaussians = 200000;
-    params.seed = test::fresh_seed("cuda cache city");
-    const Scene city = make_city(params);
+    const Scene city = gpu_city("cuda cache city");
     const Intrinsics k = intrinsics_from_fov(480, 270, 70.0);
-    // k = 64 so that cached frames carry split tasks too (auto k is too large for lists this
-    // short): the combination a sweep once found broken.
-    RenderOptions o;
-    o.catgs.cache = CacheMode::speculative;
-    o.catgs.split_k = 64;
+    std::vector<test::CameraPath> paths;
+    for (const char* spec : {"builtin:survey?frames=30&altitude=70", "builtin:orbit?frames=30&altitude=60&speed=12",
+                             "builtin:flythrough?frames=30&altitude=40&speed=14", "builtin:hover?frames=30"})
+        paths.push_back({spec, make_trajectory(spec, city.bounds, k)});
     int cached = 0;
-    for (const char* path : {"builtin:survey?frames=30&altitude=70", "builtin:orbit?frames=30&altitude=60&speed=12",
-                             "builtin:flythrough?frames=30&altitude=40&speed=14", "builtin:hover?frames=30"}) {
-        for (bool adaptive : {true, false}) {
-            RenderOptions run = o;
-            run.catgs.adaptive_window = adaptive;
-            const PathResult r = run_gpu_path(city, make_trajectory(path, city.bounds, k), run);
-            std::cout << "[cuda cache " << path << (adaptive ? " adaptive" : " W=4") << "] psnr mean " << r.mean_psnr
-                      << " worst " << r.worst_psnr << ", cached " << r.cached << std::endl;
-            EXPECT_GE(r.mean_psnr, 45.0) << path;
-            EXPECT_GE(r.worst_psnr, 40.0) << path;
-            if (r.cached > 0) {
-                EXPECT_GT(r.cached_split_tasks, 0u) << path;
-            }
-            cached += r.cached;
+    test::for_each_accuracy_bar_run(paths, [&](const test::CameraPath& p, const test::CacheRun& run) {
+        const PathResult r = run_gpu_path(city, p.cameras, run.options);
+        std::cout << "[cuda cache " << p.name << run.label << "] psnr mean " << r.mean_psnr << " worst " << r.worst_psnr
+                  << ", cached " << r.cached << std::endl;
+        EXPECT_GE(r.mean_psnr, test::kMeanPsnrBar) << p.name;
+        EXPECT_GE(r.worst_psnr, test::kWorstPsnrBar) << p.name;
+        if (r.cached > 0) {
+            EXPECT_GT(r.cached_split_tasks, 0u) << p.name;
         }
-    }
+        cached += r.cached;
+    });
     EXPECT_GT(cached, 100);
 }
 
 TEST_F(CudaCatgsTest, UnspeculatedCacheShowsStripesThatSpeculationRemoves) {
-    CityParams params;
-    params.gaussians = 200000;
-    params.seed = test::fresh_seed("cuda stripes");
-    const Scene city = make_city(params);
-    const auto cameras = make_trajectory("builtin:flythrough?frames=24&altitude=35&pitch=-30&speed=14", city.bounds,
-                                         intrinsics_from_fov(480, 270, 70.0));
-    RenderOptions naive;
-    naive.catgs.cache = CacheMode::unspeculated;
-    naive.catgs.window = 6;
-    naive.catgs.adaptive_window = false;
-    RenderOptions spec = naive;
-    spec.catgs.cache = CacheMode::speculative;
-    const PathResult bad = run_gpu_path(city, cameras, naive);
-    const PathResult good = run_gpu_path(city, cameras, spec);
+    const Scene city = gpu_city("cuda stripes");
+    const auto [bad, good] = test::run_stripes_path(city, intrinsics_from_fov(480, 270, 70.0), run_gpu_path);
     std::cout << "[cuda unspeculated] worst " << bad.worst_psnr << "; [speculative] worst " << good.worst_psnr
               << ", cached " << good.cached << std::endl;
-    EXPECT_LT(bad.worst_psnr, 35.0);
-    EXPECT_GE(good.worst_psnr, 40.0);
+    EXPECT_LT(bad.worst_psnr, test::kStripedWorstPsnr);
+    EXPECT_GE(good.worst_psnr, test::kWorstPsnrBar);
     EXPECT_GT(good.cached, 8);
 }
 
