@@ -9,7 +9,7 @@ packages=(
   libgrpc++-dev protobuf-compiler-grpc libprotobuf-dev protobuf-compiler
   libglm-dev libopenimageio-dev libspdlog-dev libgtest-dev libgmock-dev libcli11-dev
   nlohmann-json3-dev libturbojpeg0-dev libpng-dev patchelf gnuplot-nox
-  grpc-proto
+  grpc-proto openssl
 )
 
 missing=()

@@ -3,8 +3,9 @@
 //   load    N concurrent open-loop sessions for a duration; latency percentiles, JSON report
 //   scenes  list | get ID | load SOURCE | unload ID
 // Exit status: 0 success; 1 the RPC failed otherwise; 2 bad input (one line on stderr);
-// 3 server unreachable or shutting down (UNAVAILABLE, DEADLINE_EXCEEDED); 4 refused by a server
-// limit (RESOURCE_EXHAUSTED); 5 not authenticated (UNAUTHENTICATED, PERMISSION_DENIED);
+// 3 server unreachable or shutting down (UNAVAILABLE after --retries reconnections,
+// DEADLINE_EXCEEDED); 4 refused by a server limit (RESOURCE_EXHAUSTED); 5 not authenticated
+// (UNAUTHENTICATED, PERMISSION_DENIED);
 // 6 the server rejected the request (INVALID_ARGUMENT, NOT_FOUND, FAILED_PRECONDITION,
 // ALREADY_EXISTS).
 #include <CLI/CLI.hpp>
@@ -18,6 +19,7 @@
 #include <iostream>
 #include <map>
 #include <nlohmann/json.hpp>
+#include <random>
 #include <sstream>
 #include <thread>
 
@@ -64,11 +66,21 @@ const char* code_name(grpc::StatusCode code) {
 std::atomic<bool> g_stop{false};
 void on_signal(int) { g_stop = true; }
 
+std::string read_file(const std::string& path, const std::string& flag) {
+    std::ifstream in(path, std::ios::binary);
+    if (!in) throw Error(flag + " '" + path + "': cannot read the file");
+    std::stringstream s;
+    s << in.rdbuf();
+    return s.str();
+}
+
 struct Connection {
     std::string server = "localhost:50051";
     std::string token_file;
     std::string tls_ca;  ///< PEM CA: use TLS
+    std::string tls_cert, tls_key;  ///< PEM client certificate and key (mTLS)
     bool tls = false;
+    client::RetryPolicy retry;
 
     std::string authorization() const {
         if (token_file.empty()) return "";
@@ -80,18 +92,22 @@ struct Connection {
     }
     std::shared_ptr<grpc::Channel> channel(bool own_connection = false) const {
         std::shared_ptr<grpc::ChannelCredentials> creds = grpc::InsecureChannelCredentials();
-        if (tls || !tls_ca.empty()) {
+        if (tls_cert.empty() != tls_key.empty()) throw Error("--tls-cert and --tls-key: give both or neither");
+        if (tls || !tls_ca.empty() || !tls_cert.empty()) {
             grpc::SslCredentialsOptions ssl;
-            if (!tls_ca.empty()) {
-                std::ifstream in(tls_ca);
-                if (!in) throw Error("--tls-ca '" + tls_ca + "': cannot read the file");
-                std::stringstream s;
-                s << in.rdbuf();
-                ssl.pem_root_certs = s.str();
+            if (!tls_ca.empty()) ssl.pem_root_certs = read_file(tls_ca, "--tls-ca");
+            if (!tls_cert.empty()) {
+                ssl.pem_cert_chain = read_file(tls_cert, "--tls-cert");
+                ssl.pem_private_key = read_file(tls_key, "--tls-key");
             }
             creds = grpc::SslCredentials(ssl);
         }
         grpc::ChannelArguments args = net::client_channel_args();
+        // The channel's own reconnection follows our backoff, so a restarted server is found
+        // as soon as a retry asks for it.
+        args.SetInt(GRPC_ARG_INITIAL_RECONNECT_BACKOFF_MS, static_cast<int>(retry.backoff.count()));
+        args.SetInt(GRPC_ARG_MIN_RECONNECT_BACKOFF_MS, static_cast<int>(retry.backoff.count()));
+        args.SetInt(GRPC_ARG_MAX_RECONNECT_BACKOFF_MS, static_cast<int>(retry.max_backoff.count()));
         // Load tests: one TCP connection per stream, as separate viewers would have.
         if (own_connection) args.SetInt(GRPC_ARG_USE_LOCAL_SUBCHANNEL_POOL, 1);
         return grpc::CreateCustomChannel(server, creds, args);
@@ -112,6 +128,7 @@ struct SessionFlags {
     int flight_plan = 0;
     bool no_velocity = false;
     double rate = 30;
+    bool lock_step = false;
 };
 
 void add_session_flags(CLI::App* app, SessionFlags& f) {
@@ -133,6 +150,7 @@ void add_session_flags(CLI::App* app, SessionFlags& f) {
     app->add_flag("--no-velocity", f.no_velocity, "do not report the path's velocity");
     app->add_option("--rate", f.rate, "poses per second (0: lock step, next pose when a frame arrives)")
         ->capture_default_str();
+    app->add_flag("--lock-step", f.lock_step, "wait for each frame before sending the next pose, at most --rate per second");
 }
 
 v1::SessionConfig make_config(const SessionFlags& f) {
@@ -175,18 +193,27 @@ v1::SessionConfig make_config(const SessionFlags& f) {
     return c;
 }
 
-/// The scene's bounds from GetScene: trajectories are laid over them.
+/// The scene's bounds from GetScene: trajectories are laid over them. Retried on
+/// UNAVAILABLE like the streams.
 grpc::Status scene_bounds(const Connection& conn, const std::string& scene, Bounds* bounds) {
     auto stub = v1::SceneService::NewStub(conn.channel());
-    grpc::ClientContext context;
     const std::string auth = conn.authorization();
-    if (!auth.empty()) context.AddMetadata("authorization", auth);
-    context.set_deadline(std::chrono::system_clock::now() + kConnectTimeout);
-    context.set_wait_for_ready(true);
     v1::GetSceneRequest request;
     request.set_scene_id(scene);
     v1::SceneInfo info;
-    grpc::Status s = stub->GetScene(&context, request, &info);
+    grpc::Status s;
+    std::mt19937_64 random(conn.retry.seed ? conn.retry.seed : std::random_device{}());
+    for (int attempt = 0;; ++attempt) {
+        grpc::ClientContext context;
+        if (!auth.empty()) context.AddMetadata("authorization", auth);
+        context.set_deadline(std::chrono::system_clock::now() + kConnectTimeout);
+        s = stub->GetScene(&context, request, &info);
+        if (s.error_code() != grpc::StatusCode::UNAVAILABLE || attempt >= conn.retry.retries || g_stop) break;
+        const auto delay = client::backoff_delay(conn.retry, attempt + 1, std::uniform_real_distribution<double>(0, 1)(random));
+        std::fprintf(stderr, "GetScene: %s (UNAVAILABLE); retrying in %lld ms (%d of %d)\n", s.error_message().c_str(),
+                     static_cast<long long>(delay.count()), attempt + 1, conn.retry.retries);
+        std::this_thread::sleep_for(delay);
+    }
     if (s.ok()) {
         bounds->min = {info.bounds().min().x(), info.bounds().min().y(), info.bounds().min().z()};
         bounds->max = {info.bounds().max().x(), info.bounds().max().y(), info.bounds().max().z()};
@@ -201,6 +228,7 @@ client::StreamPlan make_plan(const Connection& conn, const SessionFlags& f, cons
     if (plan.path.empty()) throw Error("--trajectory '" + f.trajectory + "': no poses");
     plan.poses = plan.path.size();
     plan.rate_hz = f.rate;
+    plan.lock_step = f.lock_step;
     plan.flight_plan = f.flight_plan;
     plan.velocity = !f.no_velocity;
     plan.authorization = conn.authorization();
@@ -225,9 +253,11 @@ int cmd_stream(const Connection& conn, const SessionFlags& f, const std::string&
         std::filesystem::create_directories(out, ec);
         if (ec) throw Error("--out '" + out + "': " + ec.message());
     }
+    const std::string pace = f.rate > 0 ? std::to_string(static_cast<int>(std::lround(f.rate))) + " Hz" : "";
     std::printf("streaming %zu poses of %s at %s to %s (%dx%d %s)\n", plan.poses, f.trajectory.c_str(),
-                f.rate > 0 ? (std::to_string(static_cast<int>(std::lround(f.rate))) + " Hz").c_str() : "lock step", conn.server.c_str(), f.width,
-                f.height, f.encoding.c_str());
+                f.rate <= 0 ? "lock step" : f.lock_step ? ("lock step, at most " + pace).c_str() : pace.c_str(),
+                conn.server.c_str(), f.width, f.height, f.encoding.c_str());
+    std::fflush(stdout);
     // Per-second progress, from the reading thread.
     const Clock::time_point start = Clock::now();
     Clock::time_point window_start = start;
@@ -262,16 +292,21 @@ int cmd_stream(const Connection& conn, const SessionFlags& f, const std::string&
         const Clock::time_point now = Clock::now();
         if (now - window_start >= std::chrono::seconds(1)) report(now);
     };
-    client::StreamResult r = client::run_stream(conn.channel(), plan, on_frame, g_stop);
+    client::StreamResult r = client::run_stream_with_retries(
+        conn.channel(), plan, on_frame, g_stop, conn.retry, [](const std::string& line) {
+            std::fprintf(stderr, "%s\n", line.c_str());
+            std::fflush(stderr);
+        });
     if (window_frames > 0) report(Clock::now());
     const double secs = std::chrono::duration<double>(Clock::now() - start).count();
     std::printf("summary: %llu poses sent, %llu frames (%.1f fps, %.2f MB), %llu poses coalesced by the server, %llu "
-                "frame errors; latency p50 %.1f p90 %.1f p99 %.1f max %.1f ms; first frame after %.1f ms; status %s%s%s\n",
+                "frame errors, %d reconnects; latency p50 %.1f p90 %.1f p99 %.1f max %.1f ms; first frame after %.1f ms; "
+                "status %s%s%s\n",
                 static_cast<unsigned long long>(r.poses_sent), static_cast<unsigned long long>(r.frames),
                 secs > 0 ? r.frames / secs : 0.0, r.bytes / 1e6, static_cast<unsigned long long>(r.server_poses_coalesced),
-                static_cast<unsigned long long>(r.frame_errors), r.latency.percentile(0.5), r.latency.percentile(0.9),
-                r.latency.percentile(0.99), r.latency.max(), r.time_to_first_frame_ms, code_name(r.status.error_code()),
-                r.status.ok() ? "" : ": ", r.status.error_message().c_str());
+                static_cast<unsigned long long>(r.frame_errors), r.reconnects, r.latency.percentile(0.5),
+                r.latency.percentile(0.9), r.latency.percentile(0.99), r.latency.max(), r.time_to_first_frame_ms,
+                code_name(r.status.error_code()), r.status.ok() ? "" : ": ", r.status.error_message().c_str());
     if (!r.status.ok()) return exit_code(r.status);
     return errors > 0 ? kExitFailure : kExitOk;
 }
@@ -300,9 +335,11 @@ int cmd_load(const Connection& conn, const SessionFlags& f, int streams, double 
             // Stagger the streams along the path so they do not render identical frames.
             std::rotate(mine.path.begin(), mine.path.begin() + static_cast<long>((i * mine.path.size()) / streams),
                         mine.path.end());
-            results[static_cast<std::size_t>(i)] = client::run_stream(
+            client::RetryPolicy retry = conn.retry;
+            if (retry.seed) retry.seed += static_cast<std::uint64_t>(i);
+            results[static_cast<std::size_t>(i)] = client::run_stream_with_retries(
                 conn.channel(true), mine, [&](const v1::Frame& frame, double) { if (!frame.has_error()) ++frames_total; },
-                g_stop);
+                g_stop, retry, [i](const std::string& line) { std::fprintf(stderr, "[stream %d] %s\n", i, line.c_str()); });
         });
     }
     // Progress once a second while the streams run.
@@ -327,7 +364,9 @@ int cmd_load(const Connection& conn, const SessionFlags& f, int streams, double 
     client::LatencyRecorder all, ttff;
     std::map<std::string, int> codes;
     std::uint64_t poses = 0, frames = 0, errors = 0, bytes = 0, coalesced = 0, frames_coalesced = 0;
+    int reconnects = 0;
     for (const auto& r : results) {
+        reconnects += r.reconnects;
         all.merge(r.latency);
         if (r.time_to_first_frame_ms >= 0) ttff.add(r.time_to_first_frame_ms);
         ++codes[code_name(r.status.error_code())];
@@ -353,6 +392,7 @@ int cmd_load(const Connection& conn, const SessionFlags& f, int streams, double 
                           {"poses_coalesced", coalesced},
                           {"frames_coalesced", frames_coalesced},
                           {"frame_errors", errors},
+                          {"reconnects", reconnects},
                           {"latency_ms",
                            {{"p50", all.percentile(0.5)},
                             {"p90", all.percentile(0.9)},
@@ -369,6 +409,7 @@ int cmd_load(const Connection& conn, const SessionFlags& f, int streams, double 
                 static_cast<unsigned long long>(frames), "frames/s (all streams)", frames / elapsed, "MB/s", bytes / elapsed / 1e6,
                 "poses coalesced (server)", static_cast<unsigned long long>(coalesced), "frame errors",
                 static_cast<unsigned long long>(errors));
+    std::printf("  %-26s %12d\n", "reconnects", reconnects);
     std::printf("  latency ms (from intended send time)\n");
     for (const auto& [name, p] : std::vector<std::pair<std::string, double>>{
              {"p50", 0.5}, {"p90", 0.9}, {"p95", 0.95}, {"p99", 0.99}, {"p99.9", 0.999}})
@@ -482,6 +523,20 @@ int main(int argc, char** argv) {
     app.add_option("--token-file", conn.token_file, "send 'authorization: Bearer <first line of the file>'");
     app.add_flag("--tls", conn.tls, "connect with TLS (system roots unless --tls-ca)");
     app.add_option("--tls-ca", conn.tls_ca, "PEM CA bundle to verify the server (implies --tls)");
+    app.add_option("--tls-cert", conn.tls_cert, "PEM client certificate chain for mutual TLS (with --tls-key; implies --tls)");
+    app.add_option("--tls-key", conn.tls_key, "PEM private key of --tls-cert");
+    int retries = conn.retry.retries;
+    long backoff_ms = conn.retry.backoff.count(), max_backoff_ms = conn.retry.max_backoff.count();
+    app.add_option("--retries", retries,
+                   "stream and load: on UNAVAILABLE (server down, restarting or draining) reconnect up to this many "
+                   "times in a row, resuming the trajectory in a new session (0: fail at once)")
+        ->capture_default_str();
+    app.add_option("--backoff-ms", backoff_ms,
+                   "first reconnection delay; the n-th retry in a row waits a random time between half and all of "
+                   "min(--max-backoff-ms, backoff * 2^(n-1))")
+        ->capture_default_str();
+    app.add_option("--max-backoff-ms", max_backoff_ms, "longest reconnection delay")->capture_default_str();
+    app.add_option("--retry-seed", conn.retry.seed, "seed of the backoff jitter (0: from the clock)");
 
     CLI::App* stream = app.add_subcommand("stream", "stream one trajectory, print latency and fps each second");
     add_session_flags(stream, session);
@@ -511,6 +566,17 @@ int main(int argc, char** argv) {
         std::cerr << "catgs-client: " << e.what() << "\n";
         return kExitBadInput;
     }
+    if (retries < 0 || retries > 1000) {
+        std::cerr << "catgs-client: --retries: expected 0..1000\n";
+        return kExitBadInput;
+    }
+    if (backoff_ms < 1 || max_backoff_ms < backoff_ms || max_backoff_ms > 600'000) {
+        std::cerr << "catgs-client: --backoff-ms/--max-backoff-ms: expected 1 <= backoff <= max backoff <= 600000\n";
+        return kExitBadInput;
+    }
+    conn.retry.retries = retries;
+    conn.retry.backoff = std::chrono::milliseconds(backoff_ms);
+    conn.retry.max_backoff = std::chrono::milliseconds(max_backoff_ms);
     std::signal(SIGINT, on_signal);
     std::signal(SIGTERM, on_signal);
     try {

@@ -27,11 +27,26 @@ struct StreamPlan {
     std::vector<Camera> path;     ///< poses, in order; repeated cyclically up to `poses`
     std::size_t poses = 0;        ///< how many to send
     double rate_hz = 30;          ///< pose rate; 0 = lock step (next pose when a frame arrives)
+    bool lock_step = false;       ///< wait for each frame before the next pose (with rate_hz: at most that rate)
     int flight_plan = 0;          ///< future poses sent with each request
     bool velocity = true;         ///< send the path's velocity
     std::string authorization;    ///< "Bearer ..." or empty
     Clock::duration max_duration = std::chrono::hours(24);
+    std::size_t first = 0;        ///< index of the first pose to send (a resumed stream)
 };
+
+/// Reconnection after UNAVAILABLE (server restarting, draining or unreachable): jittered
+/// exponential backoff. The n-th consecutive retry waits a uniformly random time between half
+/// and all of min(max_backoff, backoff * 2^(n-1)); an attempt that received a frame resets n.
+struct RetryPolicy {
+    int retries = 6;  ///< consecutive failed attempts retried before giving up (0: none)
+    std::chrono::milliseconds backoff{250};
+    std::chrono::milliseconds max_backoff{5000};
+    std::uint64_t seed = 0;  ///< jitter seed (0: from the clock)
+};
+
+/// The wait before retry number `attempt` (1-based) of `policy`, drawn with `random01` in [0, 1).
+std::chrono::milliseconds backoff_delay(const RetryPolicy& policy, int attempt, double random01);
 
 struct StreamResult {
     grpc::Status status;
@@ -39,6 +54,8 @@ struct StreamResult {
     std::uint64_t server_poses_coalesced = 0, server_frames_coalesced = 0;
     double time_to_first_frame_ms = -1;
     LatencyRecorder latency;
+    std::size_t next_index = 0;   ///< where a resumed stream starts: the first pose without a frame
+    int reconnects = 0;           ///< retries after UNAVAILABLE (run_stream_with_retries)
 };
 
 /// Called for each frame received (on the reading thread) with its latency in ms.
@@ -47,6 +64,13 @@ using FrameCallback = std::function<void(const v1::Frame&, double latency_ms)>;
 /// Runs one stream to completion (blocking). `stop` ends it early (a clean half-close).
 StreamResult run_stream(const std::shared_ptr<grpc::Channel>& channel, const StreamPlan& plan,
                         const FrameCallback& on_frame, const std::atomic<bool>& stop);
+
+/// run_stream, reconnecting on UNAVAILABLE as `policy` says and resuming from the last pose
+/// that got no frame (a new session: the server kept nothing of the old one). `log` receives
+/// one line per retry. The counters add up over the attempts.
+StreamResult run_stream_with_retries(const std::shared_ptr<grpc::Channel>& channel, const StreamPlan& plan,
+                                     const FrameCallback& on_frame, const std::atomic<bool>& stop,
+                                     const RetryPolicy& policy, const std::function<void(const std::string&)>& log);
 
 v1::Pose to_pose(const Camera& camera);
 

@@ -45,7 +45,7 @@ int main(int argc, char** argv) {
     catgs::server::ServerOptions o;
     o.backend = "";
     std::vector<std::string> scenes;
-    std::uint64_t max_scene_mb = 0;
+    std::uint64_t max_scene_mb = 0, max_session_mb = 0;
     std::string token_file, log_level = "info";
     bool no_reflection = false;
 
@@ -69,7 +69,19 @@ int main(int argc, char** argv) {
     app.add_option("--max-width", o.limits.max_width, "largest image width a session may request")->capture_default_str();
     app.add_option("--max-height", o.limits.max_height, "largest image height a session may request")
         ->capture_default_str();
-    app.add_option("--max-scene-mb", max_scene_mb, "host memory of all loaded scenes, MiB (0: no limit)")
+    app.add_option("--max-scene-mb", max_scene_mb,
+                   "memory of all loaded scenes together, MiB; LoadScene beyond it is RESOURCE_EXHAUSTED (0: no limit)")
+        ->capture_default_str();
+    app.add_option("--max-session-mb", max_session_mb,
+                   "renderer memory one session may hold (GPU arenas), MiB; a session above it ends with "
+                   "RESOURCE_EXHAUSTED (0: no limit)")
+        ->capture_default_str();
+    app.add_option("--max-pose-rate", o.limits.max_pose_rate,
+                   "frame requests per second per stream, burst of one second; faster clients are read more slowly "
+                   "(0: no limit)")
+        ->capture_default_str();
+    app.add_option("--stall-timeout-ms", o.limits.stall_timeout_ms,
+                   "cancel a stream whose client has not read a frame for this long (0: never)")
         ->capture_default_str();
     app.add_option("--tls-cert", o.tls_cert_file, "PEM certificate chain (with --tls-key: serve TLS)");
     app.add_option("--tls-key", o.tls_key_file, "PEM private key");
@@ -77,7 +89,8 @@ int main(int argc, char** argv) {
     app.add_option("--token-file", token_file,
                    "require 'authorization: Bearer <token>' metadata; the token is the file's first line "
                    "(health checks stay open)");
-    app.add_flag("--no-reflection", no_reflection, "do not serve gRPC server reflection");
+    app.add_flag("--no-reflection", no_reflection,
+                 "do not serve gRPC server reflection (it is always off with --token-file)");
     app.add_option("--shutdown-grace-ms", o.shutdown_grace_ms, "on SIGTERM/SIGINT, time given to running calls")
         ->capture_default_str();
     app.add_option("--log-level", log_level, "trace, debug, info, warn, error")->capture_default_str();
@@ -108,6 +121,9 @@ int main(int argc, char** argv) {
         if (!scenes.empty()) o.preload = scenes;
         if (o.backend.empty()) o.backend = default_backend();
         o.limits.max_scene_bytes = max_scene_mb * kMiB;
+        o.limits.max_session_bytes = max_session_mb * kMiB;
+        if (!(o.limits.max_pose_rate >= 0)) throw catgs::Error("--max-pose-rate must be >= 0");
+        if (o.limits.stall_timeout_ms < 0) throw catgs::Error("--stall-timeout-ms must be >= 0");
         if (!token_file.empty()) o.bearer_token = read_token(token_file);
         o.reflection = !no_reflection;
         if (o.limits.max_sessions < 1) throw catgs::Error("--max-sessions must be >= 1");

@@ -100,6 +100,10 @@ grpc::Status parse_session_config(const v1::SessionConfig& config, const Limits&
         if (!(std::isfinite(fov) && fov > 0 && fov < 180))
             return invalid(f + "horizontal_fov_degrees", num(fov) + " is outside (0, 180)");
         k = intrinsics_from_fov(width, height, fov);
+        // A field of view within a few hundred ulps of 0 (e.g. 1e-306) makes the focal length
+        // overflow to infinity.
+        if (!std::isfinite(k.fx) || !std::isfinite(k.fy))
+            return invalid(f + "horizontal_fov_degrees", num(fov) + " is too small: the focal length overflows");
     }
 
     EncodeSettings e;
@@ -131,6 +135,9 @@ grpc::Status parse_session_config(const v1::SessionConfig& config, const Limits&
         return invalid(pf + "split_k", std::to_string(p.split_k()) + " is outside 1..16777216");
     if (!(std::isfinite(p.near_plane()) && p.near_plane() >= 0))
         return invalid(pf + "near_plane", num(p.near_plane()) + " is not a non-negative distance");
+    if (config.client_name().size() > kMaxClientNameLength)
+        return invalid(f + "client_name", std::to_string(config.client_name().size()) + " bytes; at most " +
+                                              std::to_string(kMaxClientNameLength));
     if (config.max_unacked_frames() > static_cast<std::uint32_t>(kMaxUnackedFramesLimit))
         return invalid(f + "max_unacked_frames", std::to_string(config.max_unacked_frames()) + " is outside 0..2");
 

@@ -44,19 +44,23 @@ struct SceneRegistry::Lease::State {
     mutable std::mutex mutex;
     std::map<std::string, Entry> scenes;
     std::uint64_t bytes = 0;  // host bytes of every loaded scene
+    std::function<void(const Scene*)> on_freed;
 
     void release(const std::string& id) {
         std::shared_ptr<const Scene> freed;  // destroyed outside the lock
-        std::lock_guard lock(mutex);
-        auto it = scenes.find(id);
-        if (it == scenes.end()) return;
-        if (it->second.summary.sessions > 0) --it->second.summary.sessions;
-        if (it->second.summary.unloading && it->second.summary.sessions == 0) {
-            spdlog::info("scene {} freed (last session closed)", id);
-            bytes -= it->second.summary.host_bytes;
-            freed = std::move(it->second.scene);
-            scenes.erase(it);
+        {
+            std::lock_guard lock(mutex);
+            auto it = scenes.find(id);
+            if (it == scenes.end()) return;
+            if (it->second.summary.sessions > 0) --it->second.summary.sessions;
+            if (it->second.summary.unloading && it->second.summary.sessions == 0) {
+                spdlog::info("scene {} freed (last session closed)", id);
+                bytes -= it->second.summary.host_bytes;
+                freed = std::move(it->second.scene);
+                scenes.erase(it);
+            }
         }
+        if (freed && on_freed) on_freed(freed.get());
     }
 };
 
@@ -116,13 +120,16 @@ grpc::Status SceneRegistry::resolve_path(const std::string& relative, std::strin
 grpc::Status SceneRegistry::load(const std::string& requested_id, const std::string& source, bool drop_invalid,
                                  bool trusted, SceneSummary* out) {
     if (source.empty()) return {grpc::StatusCode::INVALID_ARGUMENT, "source: empty"};
+    // The file system would see only the part before a NUL byte.
+    if (source.find('\0') != std::string::npos)
+        return {grpc::StatusCode::INVALID_ARGUMENT, "source: contains a NUL byte"};
     const std::string id = requested_id.empty() ? default_scene_id(source) : requested_id;
     if (!valid_scene_id(id))
         return {grpc::StatusCode::INVALID_ARGUMENT,
                 "scene_id '" + id + "': expected 1..128 characters of letters, digits, '.', '_' or '-'"};
     {
         std::lock_guard lock(state_->mutex);
-        if (state_->scenes.count(id)) return {grpc::StatusCode::ALREADY_EXISTS, "scene_id '" + id + "' is already loaded"};
+        if (grpc::Status taken = id_taken_locked(id); !taken.ok()) return taken;
     }
 
     std::string path = source;
@@ -163,17 +170,23 @@ grpc::Status SceneRegistry::load(const std::string& requested_id, const std::str
         // The message names the file by the path the server used; clients get their own.
         std::string message = e.what();
         if (path != source) {
-            for (std::size_t at; (at = message.find(path)) != std::string::npos;) message.replace(at, path.size(), source);
+            // Searching on after each replacement: the source may contain the path (a link in
+            // the root back to it), and searching from the start again would never end.
+            for (std::size_t at = 0; (at = message.find(path, at)) != std::string::npos; at += source.size())
+                message.replace(at, path.size(), source);
         }
         return {grpc::StatusCode::INVALID_ARGUMENT, "source: " + message};
     } catch (const std::bad_alloc&) {
         return {grpc::StatusCode::RESOURCE_EXHAUSTED, "source '" + source + "': out of memory while loading"};
+    } catch (const std::exception& e) {
+        // Not a bad input we know of: still an answer, never an exception into the worker.
+        return {grpc::StatusCode::INTERNAL, "source '" + source + "': loading failed: " + e.what()};
     }
     if (scene->count() == 0) return {grpc::StatusCode::INVALID_ARGUMENT, "source '" + source + "': the scene is empty"};
 
     SceneSummary summary = summarize(id, source, *scene);
     std::lock_guard lock(state_->mutex);
-    if (state_->scenes.count(id)) return {grpc::StatusCode::ALREADY_EXISTS, "scene_id '" + id + "' is already loaded"};
+    if (grpc::Status taken = id_taken_locked(id); !taken.ok()) return taken;
     if (max_scene_bytes_ > 0 && state_->bytes + summary.host_bytes > max_scene_bytes_)
         return {grpc::StatusCode::RESOURCE_EXHAUSTED,
                 "max-scene-bytes: scene '" + source + "' needs " + std::to_string(summary.host_bytes) +
@@ -209,21 +222,42 @@ grpc::Status acquire_scene(SceneRegistry& registry, const std::string& id, const
 
 grpc::Status SceneRegistry::unload(const std::string& id, SceneSummary* out, bool* freed) {
     std::shared_ptr<const Scene> to_free;  // destroyed outside the lock
-    std::lock_guard lock(state_->mutex);
-    auto it = state_->scenes.find(id);
-    if (it == state_->scenes.end()) return {grpc::StatusCode::NOT_FOUND, "scene_id '" + id + "': no such scene"};
-    it->second.summary.unloading = true;
-    if (out) *out = it->second.summary;
-    *freed = it->second.summary.sessions == 0;
-    if (*freed) {
-        state_->bytes -= it->second.summary.host_bytes;
-        to_free = std::move(it->second.scene);
-        state_->scenes.erase(it);
-        spdlog::info("scene {} unloaded", id);
-    } else {
-        spdlog::info("scene {} unloading: freed when its {} session(s) close", id, out ? out->sessions : 0u);
+    std::shared_ptr<const Scene> scene;    // the listener hears of it at once, freed or not
+    {
+        std::lock_guard lock(state_->mutex);
+        auto it = state_->scenes.find(id);
+        if (it == state_->scenes.end()) return {grpc::StatusCode::NOT_FOUND, "scene_id '" + id + "': no such scene"};
+        it->second.summary.unloading = true;
+        scene = it->second.scene;
+        if (out) *out = it->second.summary;
+        *freed = it->second.summary.sessions == 0;
+        if (*freed) {
+            state_->bytes -= it->second.summary.host_bytes;
+            to_free = std::move(it->second.scene);
+            state_->scenes.erase(it);
+            spdlog::info("scene {} unloaded", id);
+        } else {
+            spdlog::info("scene {} unloading: freed when its {} session(s) close", id, it->second.summary.sessions);
+        }
     }
+    if (state_->on_freed && (to_free || scene)) state_->on_freed(to_free ? to_free.get() : scene.get());
     return grpc::Status::OK;
+}
+
+void SceneRegistry::set_on_freed(std::function<void(const Scene*)> listener) {
+    std::lock_guard lock(state_->mutex);
+    state_->on_freed = std::move(listener);
+}
+
+// state_->mutex held.
+grpc::Status SceneRegistry::id_taken_locked(const std::string& id) const {
+    auto it = state_->scenes.find(id);
+    if (it == state_->scenes.end()) return grpc::Status::OK;
+    if (it->second.summary.unloading)
+        return {grpc::StatusCode::ALREADY_EXISTS,
+                "scene_id '" + id + "' is still unloading (freed when its " + std::to_string(it->second.summary.sessions) +
+                    " session(s) close); load it again after that or under another id"};
+    return {grpc::StatusCode::ALREADY_EXISTS, "scene_id '" + id + "' is already loaded"};
 }
 
 grpc::Status SceneRegistry::get(const std::string& id, SceneSummary* out) const {

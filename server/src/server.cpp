@@ -1,7 +1,9 @@
 #include "catgs/server/server.hpp"
 
 #include <grpcpp/ext/proto_server_reflection_plugin.h>
+#include <grpcpp/generic/async_generic_service.h>
 #include <grpcpp/health_check_service_interface.h>
+#include <grpcpp/impl/server_builder_option.h>
 #include <spdlog/spdlog.h>
 
 #include <fstream>
@@ -24,7 +26,11 @@ std::string read_file(const std::string& path, const std::string& flag) {
 }
 
 std::shared_ptr<grpc::ServerCredentials> credentials(const ServerOptions& o) {
-    if (o.tls_cert_file.empty() && o.tls_key_file.empty()) return grpc::InsecureServerCredentials();
+    if (o.tls_cert_file.empty() && o.tls_key_file.empty()) {
+        if (!o.tls_client_ca_file.empty())
+            throw Error("--tls-client-ca needs --tls-cert and --tls-key: client certificates are only checked over TLS");
+        return grpc::InsecureServerCredentials();
+    }
     if (o.tls_cert_file.empty() || o.tls_key_file.empty())
         throw Error("--tls-cert and --tls-key: give both or neither");
     grpc::SslServerCredentialsOptions ssl;
@@ -36,6 +42,34 @@ std::shared_ptr<grpc::ServerCredentials> credentials(const ServerOptions& o) {
     }
     return grpc::SslServerCredentials(ssl);
 }
+
+/// Removes gRPC's reflection plugin from one server: InitProtoReflectionServerBuilderPlugin
+/// registers it for every server the process builds afterwards.
+class WithoutReflection final : public grpc::ServerBuilderOption {
+public:
+    void UpdateArguments(grpc::ChannelArguments*) override {}
+    void UpdatePlugins(std::vector<std::unique_ptr<grpc::ServerBuilderPlugin>>* plugins) override {
+        std::erase_if(*plugins, [](const auto& p) { return p && p->name() == "proto_server_reflection"; });
+    }
+};
+
+/// The health listener's answer to every method but grpc.health.v1's. It also gives that
+/// server a callback method, without which gRPC refuses to build it (it has no other
+/// service until the default health service is added at start).
+class HealthPortOnly final : public grpc::CallbackGenericService {
+public:
+    grpc::ServerGenericBidiReactor* CreateReactor(grpc::GenericCallbackServerContext* context) override {
+        class Reactor : public grpc::ServerGenericBidiReactor {
+        public:
+            explicit Reactor(const std::string& method) {
+                Finish({grpc::StatusCode::UNIMPLEMENTED,
+                        "this port serves only grpc.health.v1.Health (the health listener), not " + method});
+            }
+            void OnDone() override { delete this; }
+        };
+        return new Reactor(context->method());
+    }
+};
 
 /// Service names whose health is reported (plus "", the whole server).
 const char* const kServiceNames[] = {"catgs.v1.RenderService", "catgs.v1.SceneService"};
@@ -84,9 +118,14 @@ void Server::start() {
     scene_service_ = std::make_unique<SceneServiceImpl>(*core_);
     grpc::EnableDefaultHealthCheckService(true);
     // Explicit: the plugin's static initialiser is dropped by --as-needed linking otherwise.
-    if (o.reflection) grpc::reflection::InitProtoReflectionServerBuilderPlugin();
+    // Reflection answers without a token (it is not ours to authorize), so it is off
+    // whenever a token is required.
+    const bool reflection = o.reflection && o.bearer_token.empty();
+    if (o.reflection && !reflection) spdlog::info("reflection is off: a bearer token is required (--token-file)");
+    grpc::reflection::InitProtoReflectionServerBuilderPlugin();
 
     grpc::ServerBuilder builder;
+    if (!reflection) builder.SetOption(std::make_unique<WithoutReflection>());
     builder.AddListeningPort(o.address, credentials(o), &port_);
     builder.RegisterService(render_service_.get());
     builder.RegisterService(scene_service_.get());
@@ -98,6 +137,9 @@ void Server::start() {
     if (!o.health_address.empty()) {
         // Plaintext, health only: Kubernetes' gRPC probe speaks neither TLS nor tokens.
         grpc::ServerBuilder health_builder;
+        health_builder.SetOption(std::make_unique<WithoutReflection>());
+        health_generic_ = std::make_unique<HealthPortOnly>();
+        health_builder.RegisterCallbackGenericService(health_generic_.get());
         health_builder.AddListeningPort(o.health_address, grpc::InsecureServerCredentials(), &health_port_);
         health_server_ = health_builder.BuildAndStart();
         if (!health_server_ || health_port_ == 0)

@@ -1,5 +1,10 @@
 #include "catgs/server/server_core.hpp"
 
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
+#include <new>
+
 #include "catgs/server/stream_session.hpp"
 
 namespace catgs::server {
@@ -26,9 +31,21 @@ ServerCore::ServerCore(ServerOptions options)
       admission_(options_.limits.max_sessions),
       render_pool_("render", options_.render_workers),
       encode_pool_("encode", options_.encode_workers),
-      admin_pool_("scene-load", 1) {}
+      admin_pool_("scene-load", 1) {
+    scenes_.set_on_freed([this](const Scene* scene) { drop_pooled(scene); });
+    if (options_.limits.stall_timeout_ms > 0) watchdog_ = std::thread([this] { watchdog(); });
+}
 
-ServerCore::~ServerCore() { stop_workers(); }
+ServerCore::~ServerCore() {
+    stop_workers();
+    scenes_.set_on_freed(nullptr);
+}
+
+bool is_out_of_memory(const std::exception& e) {
+    if (dynamic_cast<const std::bad_alloc*>(&e)) return true;
+    const std::string what = e.what();
+    return what.find("cudaErrorMemoryAllocation") != std::string::npos || what.find("out of memory") != std::string::npos;
+}
 
 grpc::Status ServerCore::authorize(const grpc::CallbackServerContext* context) const {
     if (options_.bearer_token.empty()) return grpc::Status::OK;
@@ -45,7 +62,74 @@ grpc::Status ServerCore::authorize(const grpc::CallbackServerContext* context) c
 }
 
 std::unique_ptr<Renderer> ServerCore::make_session_renderer() const {
+    if (options_.renderer_factory) return options_.renderer_factory();
     return make_renderer(options_.backend, parse_precision(options_.precision), options_.render_threads);
+}
+
+std::unique_ptr<Renderer> ServerCore::acquire_unary_renderer(const std::shared_ptr<const Scene>& scene) {
+    std::unique_ptr<Renderer> renderer;
+    {
+        std::lock_guard lock(pool_mutex_);
+        // One already showing this scene (no upload), else any idle one.
+        auto it = std::find_if(pool_.begin(), pool_.end(), [&](const PooledRenderer& p) { return p.scene == scene; });
+        if (it == pool_.end() && !pool_.empty()) it = pool_.begin();
+        if (it != pool_.end()) {
+            renderer = std::move(it->renderer);
+            const bool same = it->scene == scene;
+            pool_.erase(it);
+            if (same) {
+                renderer->reset_cache();
+                return renderer;
+            }
+        }
+    }
+    if (!renderer) renderer = make_session_renderer();
+    renderer->set_scene(scene);
+    return renderer;
+}
+
+void ServerCore::release_unary_renderer(std::unique_ptr<Renderer> renderer, const std::shared_ptr<const Scene>& scene,
+                                        const std::string& scene_id) {
+    if (!renderer) return;
+    std::unique_ptr<Renderer> surplus;  // destroyed outside the lock
+    std::lock_guard lock(pool_mutex_);
+    // A scene being unloaded must not be kept alive by an idle renderer. Checked under
+    // pool_mutex_: an unload after the check waits in drop_pooled for this lock.
+    SceneSummary summary;
+    if (!scenes_.get(scene_id, &summary).ok() || summary.unloading ||
+        static_cast<int>(pool_.size()) >= std::max(1, options_.render_workers)) {
+        surplus = std::move(renderer);
+        return;
+    }
+    pool_.push_back({scene, std::move(renderer)});
+}
+
+void ServerCore::drop_pooled(const Scene* scene) {
+    std::vector<PooledRenderer> dropped;  // destroyed outside the lock
+    std::lock_guard lock(pool_mutex_);
+    for (auto it = pool_.begin(); it != pool_.end();) {
+        if (it->scene.get() == scene) {
+            dropped.push_back(std::move(*it));
+            it = pool_.erase(it);
+        } else {
+            ++it;
+        }
+    }
+}
+
+// The stall watchdog: a stream whose frame has sat in gRPC's hands longer than the stall
+// timeout belongs to a client that stopped reading; cancelling it frees the session.
+void ServerCore::watchdog() {
+    const auto timeout = std::chrono::milliseconds(options_.limits.stall_timeout_ms);
+    const auto period = std::clamp(timeout / 4, std::chrono::milliseconds(20), std::chrono::milliseconds(1000));
+    std::unique_lock lock(watchdog_mutex_);
+    while (!watchdog_wake_.wait_for(lock, period, [this] { return watchdog_stop_; })) {
+        lock.unlock();
+        const auto now = std::chrono::steady_clock::now();
+        for (const auto& session : streams())
+            if (session->cancel_if_stalled(now, timeout)) counters_.streams_stalled++;
+        lock.lock();
+    }
 }
 
 void ServerCore::add_stream(const std::shared_ptr<StreamSession>& session) {
@@ -84,6 +168,13 @@ ServerStats ServerCore::stats() const {
     s.frames_buffered = counters_.frames_buffered;
     s.bytes_buffered = counters_.bytes_buffered;
     s.peak_session_buffered = counters_.peak_session_buffered;
+    s.streams_stalled = counters_.streams_stalled;
+    s.reads_delayed = counters_.reads_delayed;
+    s.out_of_memory = counters_.out_of_memory;
+    {
+        std::lock_guard lock(pool_mutex_);
+        s.pooled_renderers = static_cast<int>(pool_.size());
+    }
     return s;
 }
 
@@ -91,6 +182,17 @@ void ServerCore::stop_workers() {
     admin_pool_.stop();
     render_pool_.stop();
     encode_pool_.stop();
+    {
+        std::lock_guard lock(watchdog_mutex_);
+        watchdog_stop_ = true;
+    }
+    watchdog_wake_.notify_all();
+    if (watchdog_.joinable() && watchdog_.get_id() != std::this_thread::get_id()) watchdog_.join();
+    std::vector<PooledRenderer> pool;
+    {
+        std::lock_guard lock(pool_mutex_);
+        pool.swap(pool_);
+    }
 }
 
 }  // namespace catgs::server

@@ -6,6 +6,7 @@
 
 #include "catgs/server/encoder.hpp"
 #include "catgs/server/stream_session.hpp"
+#include "catgs/server/wire.hpp"
 
 namespace catgs::server {
 namespace {
@@ -26,15 +27,18 @@ const grpc::Status kDraining{grpc::StatusCode::UNAVAILABLE, "server is shutting 
 
 }  // namespace
 
-grpc::ServerBidiReactor<v1::StreamRequest, v1::Frame>* RenderServiceImpl::Stream(grpc::CallbackServerContext* context) {
+grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer>* RenderServiceImpl::Stream(
+    grpc::CallbackServerContext* context) {
     auto session = std::make_shared<StreamSession>(core_, context);
     session->start();
     return session.get();  // owned by itself until OnDone
 }
 
 grpc::ServerUnaryReactor* RenderServiceImpl::Render(grpc::CallbackServerContext* context,
-                                                    const v1::RenderRequest* request, v1::Frame* response) {
+                                                    const grpc::ByteBuffer* request_bytes, grpc::ByteBuffer* response) {
     if (grpc::Status auth = core_.authorize(context); !auth.ok()) return finish_now(context, auth);
+    v1::RenderRequest request;
+    if (!parse_message(*request_bytes, &request)) return finish_now(context, malformed_request("RenderRequest", *request_bytes));
     // Everything one render needs, kept alive until it finishes.
     struct Job {
         SessionSetup setup;
@@ -42,11 +46,12 @@ grpc::ServerUnaryReactor* RenderServiceImpl::Render(grpc::CallbackServerContext*
         std::unique_ptr<Admission::Ticket> ticket;
         std::unique_ptr<SceneRegistry::Lease> lease;
         ImageRGB8 image;
+        v1::Frame frame_out;
         Clock::time_point received = Clock::now();
     };
     auto job = std::make_shared<Job>();
-    grpc::Status status = parse_session_config(request->config(), core_.options().limits, "config", &job->setup);
-    if (status.ok()) status = parse_frame_request(request->frame(), job->setup.intrinsics, "frame", &job->frame);
+    grpc::Status status = parse_session_config(request.config(), core_.options().limits, "config", &job->setup);
+    if (status.ok()) status = parse_frame_request(request.frame(), job->setup.intrinsics, "frame", &job->frame);
     if (status.ok()) status = core_.admission().admit(&job->ticket);
     if (status.ok()) status = acquire_scene(core_.scenes(), job->setup.scene_id, "config", &job->lease);
     if (!status.ok()) return finish_now(context, status);
@@ -59,23 +64,43 @@ grpc::ServerUnaryReactor* RenderServiceImpl::Render(grpc::CallbackServerContext*
     const bool posted = core_.render_pool().post([&core, job, reactor, response] {
         const Clock::time_point begin = Clock::now();
         FrameStats stats;
+        const std::uint64_t max_bytes = core.options().limits.max_session_bytes;
         try {
-            auto renderer = core.make_session_renderer();
-            renderer->set_scene(job->lease->scene());
+            // Renderers are pooled across unary calls (making one is slow on CUDA).
+            auto renderer = core.acquire_unary_renderer(job->lease->scene());
             stats = renderer->render_rgb8(job->frame.camera, job->setup.options, job->image);
+            // Over the memory limit: the renderer's grow-only arenas are not kept.
+            if (max_bytes == 0 || stats.arena_bytes <= max_bytes)
+                core.release_unary_renderer(std::move(renderer), job->lease->scene(), job->setup.scene_id);
         } catch (const std::exception& e) {
-            reactor->Finish({grpc::StatusCode::INTERNAL, std::string("render failed: ") + e.what()});
+            if (is_out_of_memory(e)) {
+                core.counters().out_of_memory++;
+                reactor->Finish({grpc::StatusCode::RESOURCE_EXHAUSTED,
+                                 std::string("out-of-memory: the render failed (") + e.what() +
+                                     "); lower the resolution, retry later or use another server"});
+            } else {
+                reactor->Finish({grpc::StatusCode::INTERNAL, std::string("render failed: ") + e.what()});
+            }
+            return;
+        }
+        if (max_bytes > 0 && stats.arena_bytes > max_bytes) {
+            core.counters().out_of_memory++;
+            reactor->Finish({grpc::StatusCode::RESOURCE_EXHAUSTED,
+                             "max-session-memory: rendering scene '" + job->setup.scene_id + "' needed " +
+                                 std::to_string(stats.arena_bytes) + " bytes of renderer memory; this server allows " +
+                                 std::to_string(max_bytes) + " per session; lower the resolution"});
             return;
         }
         const Clock::time_point rendered = Clock::now();
-        response->set_sequence(job->frame.sequence);
-        response->set_encoding(to_proto(job->setup.encode.format));
-        response->set_width(static_cast<std::uint32_t>(job->image.width));
-        response->set_height(static_cast<std::uint32_t>(job->image.height));
-        response->set_client_timestamp_us(job->frame.client_timestamp_us);
-        response->mutable_timings()->set_queue_ms(ms_between(job->received, begin));
-        response->mutable_timings()->set_render_ms(ms_between(begin, rendered));
-        auto* cache = response->mutable_cache();
+        v1::Frame& out = job->frame_out;
+        out.set_sequence(job->frame.sequence);
+        out.set_encoding(to_proto(job->setup.encode.format));
+        out.set_width(static_cast<std::uint32_t>(job->image.width));
+        out.set_height(static_cast<std::uint32_t>(job->image.height));
+        out.set_client_timestamp_us(job->frame.client_timestamp_us);
+        out.mutable_timings()->set_queue_ms(ms_between(job->received, begin));
+        out.mutable_timings()->set_render_ms(ms_between(begin, rendered));
+        auto* cache = out.mutable_cache();
         cache->set_key_frame(stats.key_frame);
         cache->set_window(static_cast<std::uint32_t>(stats.window));
         cache->set_render_length(stats.pairs);
@@ -83,16 +108,18 @@ grpc::ServerUnaryReactor* RenderServiceImpl::Render(grpc::CallbackServerContext*
         cache->set_split_k(stats.split_k);
         const bool encoding = core.encode_pool().post([job, reactor, response] {
             const Clock::time_point start = Clock::now();
+            v1::Frame& out = job->frame_out;
             try {
-                encode_image(job->image, job->setup.encode, *response->mutable_data());
+                encode_image(job->image, job->setup.encode, *out.mutable_data());
             } catch (const std::exception& e) {
                 reactor->Finish({grpc::StatusCode::INTERNAL, std::string("encoding failed: ") + e.what()});
                 return;
             }
             const Clock::time_point done = Clock::now();
-            response->mutable_timings()->set_encode_ms(ms_between(start, done));
-            response->mutable_timings()->set_total_ms(ms_between(job->received, done));
-            response->mutable_stats()->set_frames_sent(1);
+            out.mutable_timings()->set_encode_ms(ms_between(start, done));
+            out.mutable_timings()->set_total_ms(ms_between(job->received, done));
+            out.mutable_stats()->set_frames_sent(1);
+            serialize_message(out, response);
             reactor->Finish(grpc::Status::OK);
         });
         if (!encoding) reactor->Finish(kDraining);
@@ -123,8 +150,11 @@ void SceneServiceImpl::fill(const SceneSummary& s, v1::SceneInfo* info) const {
 }
 
 grpc::ServerUnaryReactor* SceneServiceImpl::LoadScene(grpc::CallbackServerContext* context,
-                                                      const v1::LoadSceneRequest* request, v1::SceneInfo* response) {
+                                                      const grpc::ByteBuffer* request_bytes, grpc::ByteBuffer* response) {
     if (grpc::Status auth = core_.authorize(context); !auth.ok()) return finish_now(context, auth);
+    auto request = std::make_shared<v1::LoadSceneRequest>();
+    if (!parse_message(*request_bytes, request.get()))
+        return finish_now(context, malformed_request("LoadSceneRequest", *request_bytes));
     if (core_.admission().draining()) return finish_now(context, kDraining);
     grpc::ServerUnaryReactor* reactor = context->DefaultReactor();
     // Loading reads and validates a whole file (seconds for big scenes): off the gRPC threads.
@@ -132,7 +162,14 @@ grpc::ServerUnaryReactor* SceneServiceImpl::LoadScene(grpc::CallbackServerContex
         SceneSummary summary;
         grpc::Status status =
             core_.scenes().load(request->scene_id(), request->source(), request->drop_invalid(), false, &summary);
-        if (status.ok()) fill(summary, response);
+        if (status.ok()) {
+            v1::SceneInfo info;
+            fill(summary, &info);
+            serialize_message(info, response);
+        } else if (status.error_code() == grpc::StatusCode::RESOURCE_EXHAUSTED) {
+            core_.counters().out_of_memory++;
+            spdlog::warn("LoadScene '{}' refused: {}", request->source(), status.error_message());
+        }
         reactor->Finish(status);
     });
     if (!posted) reactor->Finish(kDraining);
@@ -140,32 +177,48 @@ grpc::ServerUnaryReactor* SceneServiceImpl::LoadScene(grpc::CallbackServerContex
 }
 
 grpc::ServerUnaryReactor* SceneServiceImpl::ListScenes(grpc::CallbackServerContext* context,
-                                                       const v1::ListScenesRequest*, v1::ListScenesResponse* response) {
+                                                       const grpc::ByteBuffer* request_bytes, grpc::ByteBuffer* response) {
     if (grpc::Status auth = core_.authorize(context); !auth.ok()) return finish_now(context, auth);
-    for (const SceneSummary& s : core_.scenes().list()) fill(s, response->add_scenes());
+    v1::ListScenesRequest request;
+    if (!parse_message(*request_bytes, &request))
+        return finish_now(context, malformed_request("ListScenesRequest", *request_bytes));
+    v1::ListScenesResponse list;
+    for (const SceneSummary& s : core_.scenes().list()) fill(s, list.add_scenes());
+    serialize_message(list, response);
     return finish_now(context, grpc::Status::OK);
 }
 
 grpc::ServerUnaryReactor* SceneServiceImpl::UnloadScene(grpc::CallbackServerContext* context,
-                                                        const v1::UnloadSceneRequest* request,
-                                                        v1::UnloadSceneResponse* response) {
+                                                        const grpc::ByteBuffer* request_bytes, grpc::ByteBuffer* response) {
     if (grpc::Status auth = core_.authorize(context); !auth.ok()) return finish_now(context, auth);
+    v1::UnloadSceneRequest request;
+    if (!parse_message(*request_bytes, &request))
+        return finish_now(context, malformed_request("UnloadSceneRequest", *request_bytes));
     SceneSummary summary;
     bool freed = false;
-    grpc::Status status = core_.scenes().unload(request->scene_id(), &summary, &freed);
+    grpc::Status status = core_.scenes().unload(request.scene_id(), &summary, &freed);
     if (status.ok()) {
-        fill(summary, response->mutable_scene());
-        response->set_freed(freed);
+        v1::UnloadSceneResponse out;
+        fill(summary, out.mutable_scene());
+        out.set_freed(freed);
+        serialize_message(out, response);
     }
     return finish_now(context, status);
 }
 
 grpc::ServerUnaryReactor* SceneServiceImpl::GetScene(grpc::CallbackServerContext* context,
-                                                     const v1::GetSceneRequest* request, v1::SceneInfo* response) {
+                                                     const grpc::ByteBuffer* request_bytes, grpc::ByteBuffer* response) {
     if (grpc::Status auth = core_.authorize(context); !auth.ok()) return finish_now(context, auth);
+    v1::GetSceneRequest request;
+    if (!parse_message(*request_bytes, &request))
+        return finish_now(context, malformed_request("GetSceneRequest", *request_bytes));
     SceneSummary summary;
-    grpc::Status status = core_.scenes().get(request->scene_id(), &summary);
-    if (status.ok()) fill(summary, response);
+    grpc::Status status = core_.scenes().get(request.scene_id(), &summary);
+    if (status.ok()) {
+        v1::SceneInfo info;
+        fill(summary, &info);
+        serialize_message(info, response);
+    }
     return finish_now(context, status);
 }
 

@@ -5,6 +5,7 @@
 #include <algorithm>
 
 #include "catgs/server/encoder.hpp"
+#include "catgs/server/wire.hpp"
 
 namespace catgs::server {
 namespace {
@@ -29,7 +30,10 @@ const char* kind_name(const v1::StreamRequest& r) {
 
 StreamSession::StreamSession(ServerCore& core, grpc::CallbackServerContext* context)
     : core_(core), context_(context), id_(core.counters().next_session_id++), started_(Clock::now()),
-      peer_(context->peer()) {}
+      peer_(context->peer()) {
+    tokens_ = std::max(1.0, core_.options().limits.max_pose_rate);  // a full bucket: one second's burst
+    tokens_at_ = started_;
+}
 
 StreamSession::~StreamSession() {
     // Every buffered frame is gone with the session; keep the server-wide gauges exact.
@@ -53,7 +57,7 @@ void StreamSession::start() {
         plan_locked(actions);
     }
     run(actions);
-    if (read) StartRead(&request_);
+    if (read) StartRead(&request_buffer_);
 }
 
 void StreamSession::drain(const grpc::Status& status) {
@@ -68,7 +72,8 @@ void StreamSession::drain(const grpc::Status& status) {
 
 void StreamSession::OnReadDone(bool ok) {
     Actions actions;
-    bool read_again = false;
+    bool read_again = false, postpone = false;
+    Clock::duration delay{0};
     {
         std::lock_guard lock(mutex_);
         if (!ok) {
@@ -78,27 +83,118 @@ void StreamSession::OnReadDone(bool ok) {
                 request_finish_locked({grpc::StatusCode::INVALID_ARGUMENT,
                                        "open: the stream ended before its opening message (StreamRequest.open)"});
         } else if (!finish_wanted_ && !finished_) {
-            if (phase_ == Phase::awaiting_open) {
+            request_.Clear();
+            if (!parse_message(request_buffer_, &request_)) {
+                // Not a half-close: the client (or something on the path) sent bytes we cannot
+                // trust; later messages of this stream cannot be trusted either.
+                request_finish_locked(malformed_request("StreamRequest", request_buffer_));
+            } else if (phase_ == Phase::awaiting_open) {
                 if (request_.has_open())
                     handle_open(request_.open());
                 else
                     request_finish_locked({grpc::StatusCode::INVALID_ARGUMENT,
                                            std::string("open: the first message of a stream must be StreamRequest.open, "
                                                        "got ") + kind_name(request_)});
-            } else if (request_.has_frame()) {
-                handle_frame(request_.frame());
             } else {
-                ++stats_.requests_received;
-                error_frame_locked(0, {grpc::StatusCode::INVALID_ARGUMENT,
-                                       request_.has_open() ? "open: the session is already open; send frame requests"
-                                                           : "kind: empty StreamRequest (set open or frame)"});
+                if (request_.has_frame()) {
+                    handle_frame(request_.frame());
+                } else {
+                    ++stats_.requests_received;
+                    error_frame_locked(0, {grpc::StatusCode::INVALID_ARGUMENT,
+                                           request_.has_open() ? "open: the session is already open; send frame requests"
+                                                               : "kind: empty StreamRequest (set open or frame)"});
+                }
+                delay = take_token_locked(Clock::now());
             }
             read_again = !finish_wanted_;
+            if (read_again && delay > Clock::duration::zero()) {
+                read_again = false;
+                postpone = read_delayed_ = true;
+            }
         }
+        request_buffer_.Clear();
         plan_locked(actions);
     }
     run(actions);
-    if (read_again) StartRead(&request_);
+    if (postpone) postpone_read(delay);
+    if (read_again) StartRead(&request_buffer_);
+}
+
+// mutex_ held.
+StreamSession::Clock::duration StreamSession::take_token_locked(Clock::time_point now) {
+    const double rate = core_.options().limits.max_pose_rate;
+    if (!(rate > 0)) return Clock::duration::zero();
+    const double burst = std::max(1.0, rate);
+    tokens_ = std::min(burst, tokens_ + rate * std::chrono::duration<double>(now - tokens_at_).count());
+    tokens_at_ = now;
+    tokens_ -= 1;
+    if (tokens_ >= 1) return Clock::duration::zero();
+    return std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>((1 - tokens_) / rate));
+}
+
+// Called with read_delayed_ set, outside the lock: the next read starts when the alarm fires.
+void StreamSession::postpone_read(Clock::duration delay) {
+    core_.counters().reads_delayed++;
+    auto alarm = std::make_unique<grpc::Alarm>();
+    // A weak reference: the alarm lives in the session, and while read_delayed_ is set the
+    // session cannot finish, so self_ keeps it alive until the alarm has fired.
+    alarm->Set(std::chrono::system_clock::now() + std::chrono::duration_cast<std::chrono::system_clock::duration>(delay),
+               [weak = weak_from_this()](bool) {
+                   if (auto self = weak.lock()) self->on_read_alarm();
+               });
+    std::unique_ptr<grpc::Alarm> previous;  // fired long ago; destroyed outside the lock
+    std::lock_guard lock(mutex_);
+    previous = std::move(read_alarm_);
+    read_alarm_ = std::move(alarm);
+}
+
+void StreamSession::on_read_alarm() {
+    Actions actions;
+    bool read = false;
+    {
+        std::lock_guard lock(mutex_);
+        if (!finish_wanted_ && !finished_) {
+            read = true;  // read_delayed_ stays set, so nobody finishes before StartRead
+        } else {
+            read_delayed_ = false;
+            plan_locked(actions);
+        }
+    }
+    if (read) {
+        StartRead(&request_buffer_);
+        std::lock_guard lock(mutex_);
+        read_delayed_ = false;
+        plan_locked(actions);
+    }
+    run(actions);
+}
+
+bool StreamSession::cancel_if_stalled(Clock::time_point now, std::chrono::milliseconds timeout) {
+    double stalled_ms = 0;
+    {
+        std::lock_guard lock(mutex_);
+        if (finished_ || cancelling_ || !write_in_flight_ || now - write_started_ <= timeout) return false;
+        stalled_ms = std::chrono::duration<double, std::milli>(now - write_started_).count();
+        // Finish waits for cancelling_: the call stays alive for TryCancel below.
+        cancelling_ = true;
+        request_finish_locked({grpc::StatusCode::DEADLINE_EXCEEDED,
+                               "stall-timeout: the client took no frame off the wire for " +
+                                   std::to_string(static_cast<long>(stalled_ms)) + " ms"});
+    }
+    spdlog::warn("session {} ({}): a frame has waited {:.0f} ms for the client to read it; cancelling the stream "
+                 "(stall watchdog)",
+                 id_, peer_, stalled_ms);
+    // Trailers cannot pass a stream the client does not read: cancelling (RST_STREAM) is the
+    // only way to end it. The pending write then completes with ok = false.
+    context_->TryCancel();
+    Actions actions;
+    {
+        std::lock_guard lock(mutex_);
+        cancelling_ = false;
+        plan_locked(actions);
+    }
+    run(actions);
+    return true;
 }
 
 // mutex_ held.
@@ -163,18 +259,30 @@ void StreamSession::error_frame_locked(std::uint64_t sequence, const grpc::Statu
 void StreamSession::initialise() {
     std::unique_ptr<Renderer> renderer;
     std::string error;
+    bool out_of_memory = false;
     try {
         renderer = core_.make_session_renderer();
-        renderer->set_scene(lease_->scene());
+        renderer->set_scene(lease_->scene());  // CUDA: uploads the scene unless another session did
     } catch (const std::exception& e) {
         error = e.what();
+        out_of_memory = is_out_of_memory(e);
+        if (error.empty()) error = "unknown error";
     }
     Actions actions;
     {
         std::lock_guard lock(mutex_);
         if (!error.empty()) {
-            spdlog::error("session {}: cannot create a renderer: {}", id_, error);
-            request_finish_locked({grpc::StatusCode::INTERNAL, "cannot create a renderer: " + error});
+            renderer.reset();  // frees whatever it had allocated before the failure
+            if (out_of_memory) {
+                core_.counters().out_of_memory++;
+                spdlog::warn("session {}: out of memory loading scene {} for rendering: {}", id_, setup_.scene_id, error);
+                request_finish_locked({grpc::StatusCode::RESOURCE_EXHAUSTED,
+                                       "out-of-memory: the server cannot hold scene '" + setup_.scene_id +
+                                           "' for another session (" + error + "); retry later or on another server"});
+            } else {
+                spdlog::error("session {}: cannot create a renderer: {}", id_, error);
+                request_finish_locked({grpc::StatusCode::INTERNAL, "cannot create a renderer: " + error});
+            }
         } else {
             renderer_ = std::move(renderer);
             phase_ = Phase::open;
@@ -214,27 +322,51 @@ void StreamSession::render_next() {
     ImageRGB8 image;
     FrameStats frame_stats;
     std::string error;
+    bool out_of_memory = false;
     try {
         frame_stats = renderer_->render_rgb8(pose.frame.camera, setup_.options, image,
                                              pose.frame.hints ? &*pose.frame.hints : nullptr);
     } catch (const std::exception& e) {
         error = e.what();
+        out_of_memory = is_out_of_memory(e);
+        if (error.empty()) error = "unknown error";
     }
     const Clock::time_point rendered = Clock::now();
+    const std::uint64_t max_bytes = core_.options().limits.max_session_bytes;
+    const bool over_limit = error.empty() && max_bytes > 0 && frame_stats.arena_bytes > max_bytes;
     {
         // The renderer is free again: the next pose may render while this one is encoded.
         std::lock_guard lock(mutex_);
         render_busy_ = false;
         render_ms_sum_ += ms_between(begin, rendered);
-        if (!error.empty()) {
+        if (!error.empty() || over_limit) {
             --encoding_;
             drop_unacked_locked(pose.frame.sequence);
-            error_frame_locked(pose.frame.sequence, {grpc::StatusCode::INTERNAL, "render failed: " + error});
+            const Intrinsics& k = setup_.intrinsics;
+            const std::string size = std::to_string(k.width) + "x" + std::to_string(k.height);
+            if (over_limit) {
+                // The arenas are grow-only: the session would keep holding this memory.
+                core_.counters().out_of_memory++;
+                request_finish_locked({grpc::StatusCode::RESOURCE_EXHAUSTED,
+                                       "max-session-memory: rendering scene '" + setup_.scene_id + "' at " + size +
+                                           " needed " + std::to_string(frame_stats.arena_bytes) +
+                                           " bytes of renderer memory; this server allows " +
+                                           std::to_string(max_bytes) + " per session; lower the resolution"});
+            } else if (out_of_memory) {
+                // Ending the session frees its buffers; an error frame would leave them held.
+                core_.counters().out_of_memory++;
+                spdlog::warn("session {}: out of memory rendering {}: {}", id_, size, error);
+                request_finish_locked({grpc::StatusCode::RESOURCE_EXHAUSTED,
+                                       "out-of-memory: rendering at " + size + " failed (" + error +
+                                           "); lower the resolution, retry later or use another server"});
+            } else {
+                error_frame_locked(pose.frame.sequence, {grpc::StatusCode::INTERNAL, "render failed: " + error});
+            }
         }
         plan_locked(actions);
     }
     run(actions);
-    if (!error.empty()) return;
+    if (!error.empty() || over_limit) return;
 
     v1::Frame frame;
     frame.set_sequence(pose.frame.sequence);
@@ -311,6 +443,7 @@ void StreamSession::OnWriteDone(bool ok) {
     {
         std::lock_guard lock(mutex_);
         write_in_flight_ = false;
+        in_flight_bytes_ = 0;
         if (!ok) request_finish_locked({grpc::StatusCode::CANCELLED, "write failed: the client went away"});
         plan_locked(actions);
     }
@@ -380,7 +513,10 @@ void StreamSession::plan_locked(Actions& actions) {
                           next_errors_.empty();
         if (!finish_wanted_ && reads_done_ && phase_ == Phase::open && idle) finish_wanted_ = grpc::Status::OK;
         if (finish_wanted_) {
-            if (!write_in_flight_) {
+            if (read_delayed_) actions.cancel_alarm = true;
+            // Writes, postponed reads and watchdog cancels call into gRPC from outside a
+            // reaction: Finish (after which the call may end) waits for them.
+            if (!write_in_flight_ && !read_delayed_ && !cancelling_) {
                 finished_ = true;
                 final_status_ = *finish_wanted_;
                 actions.finish = *finish_wanted_;
@@ -417,13 +553,15 @@ void StreamSession::plan_locked(Actions& actions) {
                     out->set_frames_sent(stats_.frames_sent);
                     out->set_frame_errors(stats_.frame_errors);
                     write_in_flight_ = true;
-                    actions.write = &in_flight_;
+                    write_started_ = Clock::now();
+                    in_flight_bytes_ = static_cast<std::int64_t>(in_flight_.data().size());
+                    actions.write = true;
                 }
             }
         }
     }
     int frames = (write_in_flight_ ? 1 : 0) + (next_image_ ? 1 : 0) + static_cast<int>(next_errors_.size());
-    std::int64_t bytes = (write_in_flight_ ? static_cast<std::int64_t>(in_flight_.data().size()) : 0) +
+    std::int64_t bytes = (write_in_flight_ ? in_flight_bytes_ : 0) +
                          (next_image_ ? static_cast<std::int64_t>(next_image_->data().size()) : 0);
     set_buffered_locked(frames, bytes);
 }
@@ -433,7 +571,21 @@ void StreamSession::run(const Actions& actions) {
         std::lock_guard lock(mutex_);
         render_busy_ = false;
     }
-    if (actions.write) StartWrite(actions.write, grpc::WriteOptions().set_no_compression());
+    if (actions.cancel_alarm) {
+        std::unique_ptr<grpc::Alarm> alarm;
+        {
+            std::lock_guard lock(mutex_);
+            alarm = std::move(read_alarm_);
+        }
+        if (alarm) alarm->Cancel();  // its callback runs (ok = false) and lets Finish proceed
+    }
+    if (actions.write) {
+        // in_flight_ is ours until OnWriteDone (write_in_flight_ was set with it): serialize
+        // it outside the lock, then let its copy of the image go.
+        serialize_message(in_flight_, &in_flight_buffer_);
+        in_flight_.Clear();
+        StartWrite(&in_flight_buffer_, grpc::WriteOptions().set_no_compression());
+    }
     if (actions.finish) Finish(*actions.finish);
 }
 

@@ -148,7 +148,8 @@ TEST(ServerAdmin, ShutdownDrainsOpenStreamsWithUnavailable) {
 class SceneServiceTest : public ::testing::Test {
 protected:
     void SetUp() override {
-        root_ = fs::path(CATGS_TEST_TMP) / "scene-root";
+        // Per process: ctest runs this suite's tests in parallel processes.
+        root_ = fs::path(CATGS_TEST_TMP) / ("scene-root-" + std::to_string(getpid())) / "root";
         fs::create_directories(root_);
         // A small scene file under the root, and one outside it.
         Scene small = load_scene("builtin:city?gaussians=10000&seed=3");
@@ -172,6 +173,12 @@ protected:
         v1::GetSceneRequest request;
         request.set_scene_id(id);
         return stub_->GetScene(&context, request, info);
+    }
+    void TearDown() override {
+        stub_.reset();
+        server_.reset();
+        std::error_code ec;
+        fs::remove_all(root_.parent_path(), ec);
     }
     fs::path root_;
     std::unique_ptr<server::Server> server_;

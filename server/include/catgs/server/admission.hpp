@@ -19,8 +19,22 @@ struct Limits {
     /// Largest image a session may ask for; 4K covers every viewer and bounds arena memory.
     int max_width = 3840;
     int max_height = 2160;
-    /// Host memory of all loaded scenes together (0: no limit).
+    /// Host memory of all loaded scenes together (0: no limit). On the CUDA backend the
+    /// sessions of a scene share one device copy of the same size, so this also bounds the
+    /// device memory held by scenes.
     std::uint64_t max_scene_bytes = 0;
+    /// Renderer memory one session may hold, as the backend reports it after each frame
+    /// (FrameStats::arena_bytes: the GPU arenas; the CPU backend reports none): a session
+    /// above it ends with RESOURCE_EXHAUSTED (0: no limit). The resolution limits above bound
+    /// the per-pixel part; the tile-pair part depends on the scene and the view.
+    std::uint64_t max_session_bytes = 0;
+    /// Frame requests per second one stream may send (0: no limit), with a burst of one
+    /// second's worth. Faster clients are not refused: the server reads their next message
+    /// later, so HTTP/2 flow control slows them down.
+    double max_pose_rate = 240;
+    /// A stream whose client has not taken a frame off the wire for this long (a write stuck
+    /// in flow control) is cancelled, freeing its session (0: never).
+    int stall_timeout_ms = 20000;
 };
 
 class Admission {

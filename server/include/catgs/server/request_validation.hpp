@@ -24,6 +24,8 @@ namespace catgs::server {
 inline constexpr std::uint32_t kMaxProtocolDimension = 16384;
 /// Flight plans longer than the largest speculation window are of no use to the renderer.
 inline constexpr int kMaxFlightPlanPoses = kMaxWindow;
+/// SessionConfig.client_name goes into log lines: longer names are malformed requests.
+inline constexpr std::size_t kMaxClientNameLength = 256;
 /// Server-side defaults for fields left at zero.
 inline constexpr int kDefaultJpegQuality = 85;
 inline constexpr double kDefaultHorizontalFovDegrees = 70.0;

@@ -10,6 +10,7 @@
 #include <grpcpp/support/status.h>
 
 #include <cstdint>
+#include <functional>
 #include <map>
 #include <memory>
 #include <mutex>
@@ -64,12 +65,17 @@ public:
     grpc::Status unload(const std::string& id, SceneSummary* out, bool* freed);
     grpc::Status get(const std::string& id, SceneSummary* out) const;
     std::vector<SceneSummary> list() const;
+    /// Called (outside the registry's lock) when a scene is unloaded (it accepts no more
+    /// sessions, freed or not) and again when it is freed, so that holders of extra references
+    /// (the server's renderer pool) can let it go. Set before serving.
+    void set_on_freed(std::function<void(const Scene*)> listener);
 
     /// Resolves a client path against the scene root; INVALID_ARGUMENT when it is absolute,
     /// leaves the root (.., symbolic links) or does not exist. Public for tests.
     grpc::Status resolve_path(const std::string& relative, std::string* absolute) const;
 
 private:
+    grpc::Status id_taken_locked(const std::string& id) const;
     std::shared_ptr<Lease::State> state_;
     std::string scene_root_;
     std::uint64_t max_scene_bytes_;

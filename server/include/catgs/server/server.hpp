@@ -3,6 +3,7 @@
 // catgs-server binary and, in-process, by the integration tests.
 #pragma once
 
+#include <grpcpp/generic/async_generic_service.h>
 #include <grpcpp/grpcpp.h>
 
 #include <chrono>
@@ -44,6 +45,7 @@ private:
     std::unique_ptr<RenderServiceImpl> render_service_;
     std::unique_ptr<SceneServiceImpl> scene_service_;
     std::unique_ptr<grpc::Server> server_;
+    std::unique_ptr<grpc::CallbackGenericService> health_generic_;
     std::unique_ptr<grpc::Server> health_server_;
     int port_ = 0, health_port_ = 0;
     std::mutex mutex_;

@@ -5,11 +5,14 @@
 #include <grpcpp/grpcpp.h>
 
 #include <atomic>
+#include <condition_variable>
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <mutex>
 #include <set>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "catgs/renderer.hpp"
@@ -36,8 +39,13 @@ struct ServerOptions {
     Limits limits;
     std::string tls_cert_file, tls_key_file, tls_client_ca_file;
     std::string bearer_token;  ///< empty: no token required
+    /// Serve gRPC server reflection (never while a bearer token is required: reflection
+    /// would answer without one).
     bool reflection = true;
     int shutdown_grace_ms = 5000;
+    /// Tests only: makes the renderers instead of make_renderer(backend, ...), e.g. to
+    /// simulate a device that runs out of memory.
+    std::function<std::unique_ptr<Renderer>()> renderer_factory;
 };
 
 /// Server-wide counters; gauges are current values, the rest totals.
@@ -52,6 +60,10 @@ struct ServerStats {
     std::int64_t frames_buffered = 0;      ///< encoded frames held by all sessions' output slots (gauge)
     std::int64_t bytes_buffered = 0;       ///< their bytes (gauge)
     std::int64_t peak_session_buffered = 0;  ///< most frames one session ever held at once
+    std::uint64_t streams_stalled = 0;     ///< streams cancelled by the stall watchdog
+    std::uint64_t reads_delayed = 0;       ///< reads postponed by the pose-rate limit
+    std::uint64_t out_of_memory = 0;       ///< sessions and loads refused for memory
+    int pooled_renderers = 0;              ///< idle renderers kept for unary renders (gauge)
 };
 
 class StreamSession;
@@ -74,6 +86,14 @@ public:
     /// call from a worker.
     std::unique_ptr<Renderer> make_session_renderer() const;
 
+    /// Unary renders reuse renderers (on CUDA each holds arenas and a stream, slow to make):
+    /// a renderer showing `scene`, taken from the pool when one is idle. Call from a worker.
+    std::unique_ptr<Renderer> acquire_unary_renderer(const std::shared_ptr<const Scene>& scene);
+    /// Returns a renderer to the pool (at most render_workers are kept). Call while the
+    /// caller still holds its scene lease: renderers of scenes being unloaded are dropped.
+    void release_unary_renderer(std::unique_ptr<Renderer> renderer, const std::shared_ptr<const Scene>& scene,
+                                const std::string& scene_id);
+
     void add_stream(const std::shared_ptr<StreamSession>& session);
     void remove_stream(StreamSession* session);
     std::vector<std::shared_ptr<StreamSession>> streams() const;
@@ -83,13 +103,17 @@ public:
             frame_errors{0};
         std::atomic<std::int64_t> frames_buffered{0}, bytes_buffered{0}, peak_session_buffered{0};
         std::atomic<std::uint64_t> next_session_id{1};
+        std::atomic<std::uint64_t> streams_stalled{0}, reads_delayed{0}, out_of_memory{0};
     };
     Counters& counters() { return counters_; }
     ServerStats stats() const;
-    /// Stops the worker pools (after the gRPC server has shut down).
+    /// Stops the worker pools and the watchdog (after the gRPC server has shut down).
     void stop_workers();
 
 private:
+    void watchdog();
+    void drop_pooled(const Scene* scene);
+
     ServerOptions options_;
     SceneRegistry scenes_;
     Admission admission_;
@@ -99,6 +123,21 @@ private:
     WorkerPool admin_pool_;  ///< scene loads: slow, kept off the render workers
     mutable std::mutex streams_mutex_;
     std::set<std::shared_ptr<StreamSession>> streams_;
+
+    struct PooledRenderer {
+        std::shared_ptr<const Scene> scene;
+        std::unique_ptr<Renderer> renderer;
+    };
+    mutable std::mutex pool_mutex_;
+    std::vector<PooledRenderer> pool_;
+
+    std::mutex watchdog_mutex_;
+    std::condition_variable watchdog_wake_;
+    bool watchdog_stop_ = false;
+    std::thread watchdog_;
 };
+
+/// True when `e` says that memory ran out (std::bad_alloc, or a CUDA allocation error).
+bool is_out_of_memory(const std::exception& e);
 
 }  // namespace catgs::server

@@ -1,4 +1,7 @@
 // One RenderService.Stream call: a ServerBidiReactor that owns a renderer for its session.
+// The method is registered raw (see wire.hpp): requests arrive as bytes and are parsed here,
+// so a malformed message ends the stream with INVALID_ARGUMENT instead of passing for a
+// half-close; frames are serialized just before they are written.
 //
 // Threads: reactions (OnReadDone, OnWriteDone, OnCancel, OnDone) run on gRPC threads and only
 // move data and flags under `mutex_`; rendering runs on the render pool and encoding on the
@@ -6,13 +9,21 @@
 // while holding `mutex_` (gRPC may run a reaction inline).
 //
 // Backpressure (latest wins, bounded memory):
-// - input: one pending pose; a newer request replaces it (poses_coalesced);
+// - input: one pending pose; a newer request replaces it (poses_coalesced); frame requests
+//   beyond Limits::max_pose_rate are not refused but read later (a token bucket; the next
+//   read waits on an alarm), so HTTP/2 flow control slows the client down;
 // - credits: at most max_unacked_frames frames rendered but not acknowledged by the client
 //   (FrameRequest.last_received_sequence); while over budget nothing is rendered;
 // - output: one frame in flight in gRPC plus one waiting; a newer encoded frame replaces the
-//   waiting one (frames_coalesced). Error frames queue separately, at most a few.
+//   waiting one (frames_coalesced). Error frames queue separately, at most a few;
+// - stalls: a frame in flight longer than Limits::stall_timeout_ms (the client stopped
+//   reading) gets the call cancelled by the server's watchdog (cancel_if_stalled).
+//
+// Finish is never called while a write, a postponed read or a watchdog cancel is under way:
+// each of those calls into gRPC from outside a reaction, which is only safe before Finish.
 #pragma once
 
+#include <grpcpp/alarm.h>
 #include <grpcpp/grpcpp.h>
 
 #include <chrono>
@@ -30,7 +41,7 @@
 
 namespace catgs::server {
 
-class StreamSession : public grpc::ServerBidiReactor<v1::StreamRequest, v1::Frame>,
+class StreamSession : public grpc::ServerBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer>,
                       public std::enable_shared_from_this<StreamSession> {
 public:
     using Clock = std::chrono::steady_clock;
@@ -43,6 +54,9 @@ public:
     /// Server shutdown: drop queued work and end the stream with `status` as soon as no write
     /// is in flight.
     void drain(const grpc::Status& status);
+    /// Watchdog: cancels the call when a frame has been in flight longer than `timeout`.
+    /// Returns true when it cancelled.
+    bool cancel_if_stalled(Clock::time_point now, std::chrono::milliseconds timeout);
 
     void OnReadDone(bool ok) override;
     void OnWriteDone(bool ok) override;
@@ -66,7 +80,8 @@ private:
     // The helpers below require mutex_ held. Each returns work to do after unlocking.
     struct Actions {
         bool schedule_render = false;
-        const v1::Frame* write = nullptr;
+        bool write = false;         // serialize in_flight_ and write it
+        bool cancel_alarm = false;  // a postponed read is no longer wanted
         std::optional<grpc::Status> finish;
     };
     void plan_locked(Actions& actions);
@@ -75,6 +90,10 @@ private:
     void drop_unacked_locked(std::uint64_t sequence);
     void set_buffered_locked(int frames, std::int64_t bytes);
     void error_frame_locked(std::uint64_t sequence, const grpc::Status& status);
+    /// Takes a token for a frame request; returns how long to wait before the next read.
+    Clock::duration take_token_locked(Clock::time_point now);
+    void postpone_read(Clock::duration delay);
+    void on_read_alarm();
 
     ServerCore& core_;
     grpc::CallbackServerContext* context_;
@@ -83,7 +102,8 @@ private:
     const Clock::time_point started_;
     std::string peer_;
 
-    v1::StreamRequest request_;  // the one read in flight
+    grpc::ByteBuffer request_buffer_;  // the one read in flight
+    v1::StreamRequest request_;        // its parsed contents
 
     std::mutex mutex_;
     Phase phase_ = Phase::awaiting_open;
@@ -101,7 +121,10 @@ private:
     int encoding_ = 0;          // frames being encoded
 
     bool write_in_flight_ = false;
-    v1::Frame in_flight_;                 // owned by gRPC between StartWrite and OnWriteDone
+    Clock::time_point write_started_;
+    v1::Frame in_flight_;                 // chosen for writing; cleared once serialized
+    grpc::ByteBuffer in_flight_buffer_;   // owned by gRPC between StartWrite and OnWriteDone
+    std::int64_t in_flight_bytes_ = 0;
     std::optional<v1::Frame> next_image_; // latest wins
     std::deque<v1::Frame> next_errors_;
     std::uint64_t newest_image_sequence_ = 0;  // newest image frame queued or written
@@ -111,6 +134,13 @@ private:
     std::optional<grpc::Status> finish_wanted_;
     bool finished_ = false;
     grpc::Status final_status_;
+
+    // Pose-rate limit: a token bucket; while read_delayed_ the next read waits on read_alarm_.
+    double tokens_ = 0;
+    Clock::time_point tokens_at_;
+    bool read_delayed_ = false;
+    std::unique_ptr<grpc::Alarm> read_alarm_;
+    bool cancelling_ = false;  // the watchdog is cancelling the call
 
     // Session statistics (for Frame.stats and the close log line).
     struct Counters {

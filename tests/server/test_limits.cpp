@@ -1,0 +1,228 @@
+// Limits (README, "Limits"): message sizes, the client name, the pose rate, per-session
+// renderer memory, the stall watchdog for clients that stop reading, and the renderer pool of
+// unary renders.
+#include "fake_device.hpp"
+#include "server_test_util.hpp"
+
+namespace catgs::test {
+namespace {
+
+/// A client allowed to send big messages, so that the server's limit is what refuses them.
+std::shared_ptr<grpc::Channel> big_sender(int port) {
+    grpc::ChannelArguments args;  // not client_channel_args(): its 1 MiB send limit would win
+    args.SetMaxReceiveMessageSize(net::kMaxFrameMessageBytes);
+    args.SetMaxSendMessageSize(8 * 1024 * 1024);
+    return channel_to(port, args);
+}
+
+TEST(ServerLimits, RequestsLargerThanTheReceiveLimitAreRefused) {
+    auto server = start_server();
+    BackgroundStream healthy(server->port());
+    ASSERT_TRUE(healthy.advances(2));
+    const std::string big(2 * 1024 * 1024, 'x');
+    {
+        StreamClient client(big_sender(server->port()));
+        v1::SessionConfig config = session_config(v1::ENCODING_JPEG);
+        config.set_client_name(big);
+        client.open(config);
+        const grpc::Status status = client.close();
+        EXPECT_EQ(status.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED) << status.error_message();
+        EXPECT_NE(status.error_message().find("Received message larger than max"), std::string::npos)
+            << status.error_message();
+        EXPECT_NE(status.error_message().find("vs. 1048576)"), std::string::npos) << status.error_message();
+    }
+    {
+        auto scenes = v1::SceneService::NewStub(big_sender(server->port()));
+        grpc::ClientContext context;
+        v1::LoadSceneRequest request;
+        request.set_source(big);
+        v1::SceneInfo info;
+        const grpc::Status status = scenes->LoadScene(&context, request, &info);
+        EXPECT_EQ(status.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED) << status.error_message();
+        EXPECT_NE(status.error_message().find("Received message larger than max"), std::string::npos)
+            << status.error_message();
+    }
+    // Just below the limit passes the transport; the field checks then apply.
+    {
+        StreamClient client(big_sender(server->port()));
+        v1::SessionConfig config = session_config(v1::ENCODING_JPEG);
+        config.set_client_name(std::string(1000 * 1000, 'y'));
+        client.open(config);
+        const grpc::Status status = client.close();
+        EXPECT_EQ(status.error_code(), grpc::StatusCode::INVALID_ARGUMENT) << status.error_message();
+        EXPECT_EQ(status.error_message(), "open.client_name: 1000000 bytes; at most 256");
+    }
+    EXPECT_TRUE(healthy.advances(3));
+    healthy.stop();
+    EXPECT_FALSE(healthy.failed()) << healthy.failure();
+}
+
+/// Frame requests beyond max_pose_rate are not refused and not lost: the server reads them
+/// later, so the client is slowed down by flow control.
+TEST(ServerLimits, PoseRateLimitSlowsAFastClientDown) {
+    constexpr double kRate = 100;
+    constexpr int kRequests = 250;  // 100 at once (the burst), the rest at 100/s: >= 1.5 s
+    server::ServerOptions o = test_options();
+    o.limits.max_pose_rate = kRate;
+    auto server = start_server(o);
+    const auto path = uav_path(kRequests);
+    StreamClient client(channel_to(server->port()));
+    ASSERT_TRUE(client.open(session_config(v1::ENCODING_JPEG)));
+    std::atomic<std::uint64_t> last_sequence{0};
+    v1::Frame last;
+    std::thread reader([&] {
+        for (v1::Frame f; client.stream->Read(&f);) {
+            last_sequence = f.sequence();
+            last = f;
+        }
+    });
+    const auto begin = std::chrono::steady_clock::now();
+    for (int i = 1; i <= kRequests; ++i)
+        ASSERT_TRUE(client.send(frame_request(static_cast<std::uint64_t>(i), path[static_cast<std::size_t>(i - 1)],
+                                              last_sequence)));
+    client.stream->WritesDone();
+    reader.join();
+    const grpc::Status status = client.stream->Finish();
+    const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - begin).count();
+    std::printf("pose rate %.0f/s: %d requests took %.2f s; %llu reads delayed\n", kRate, kRequests, seconds,
+                static_cast<unsigned long long>(server->stats().reads_delayed));
+    EXPECT_TRUE(status.ok()) << status.error_message();
+    EXPECT_GE(seconds, (kRequests - kRate) / kRate * 0.8);
+    EXPECT_GT(server->stats().reads_delayed, 0u);
+    // Every request was read (none dropped), and the newest pose rendered last.
+    EXPECT_EQ(last.sequence(), static_cast<std::uint64_t>(kRequests));
+    EXPECT_EQ(last.stats().requests_received(), static_cast<std::uint64_t>(kRequests));
+    EXPECT_EQ(last.stats().frame_errors(), 0u);
+}
+
+/// Renderer memory per session (as the backend reports it; here a simulated device whose
+/// arenas take 100 bytes per pixel): a session above max_session_bytes ends.
+TEST(ServerLimits, SessionMemoryLimit) {
+    auto device = std::make_shared<FakeDevice>(1'000'000'000, 100);
+    server::ServerOptions o = test_options();
+    o.renderer_factory = device->factory();
+    o.limits.max_session_bytes = 4'000'000;  // 160x90 needs 1.44 MB, 320x180 5.76 MB
+    auto server = start_server(o);
+    {
+        StreamClient client(channel_to(server->port()));
+        ASSERT_TRUE(client.open(session_config(v1::ENCODING_JPEG)));
+        ASSERT_TRUE(client.send(frame_request(1, uav_path(2)[0], 0)));
+        v1::Frame frame;
+        ASSERT_TRUE(client.stream->Read(&frame));
+        EXPECT_FALSE(frame.has_error()) << frame.error().message();
+        EXPECT_TRUE(client.close().ok());
+    }
+    const std::string expected =
+        "max-session-memory: rendering scene 'city' at 320x180 needed 5760000 bytes of renderer memory; this server "
+        "allows 4000000 per session; lower the resolution";
+    {
+        StreamClient client(channel_to(server->port()));
+        v1::SessionConfig config = session_config(v1::ENCODING_JPEG);
+        config.set_width(320);
+        config.set_height(180);
+        ASSERT_TRUE(client.open(config));
+        client.send(frame_request(1, uav_path(2, 320, 180)[0], 0));
+        const grpc::Status status = client.close();
+        EXPECT_EQ(status.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED) << status.error_message();
+        EXPECT_EQ(status.error_message(), expected);
+    }
+    {
+        v1::RenderRequest request;
+        *request.mutable_config() = session_config(v1::ENCODING_PNG);
+        request.mutable_config()->set_width(320);
+        request.mutable_config()->set_height(180);
+        *request.mutable_frame() = frame_request(1, uav_path(2, 320, 180)[0], 0);
+        auto stub = v1::RenderService::NewStub(channel_to(server->port()));
+        grpc::ClientContext context;
+        v1::Frame frame;
+        const grpc::Status status = stub->Render(&context, request, &frame);
+        EXPECT_EQ(status.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED) << status.error_message();
+        EXPECT_EQ(status.error_message(),
+                  "max-session-memory: rendering scene 'city' needed 5760000 bytes of renderer memory; this server "
+                  "allows 4000000 per session; lower the resolution");
+        EXPECT_EQ(server->stats().pooled_renderers, 0);  // the oversized renderer was not kept
+    }
+    EXPECT_EQ(server->stats().out_of_memory, 2u);
+    EXPECT_TRUE(eventually([&] { return server->stats().sessions_active == 0; }));
+}
+
+/// A client that stops reading: its frame sits in flow control; after stall_timeout_ms the
+/// watchdog cancels the stream and frees the session. Other streams are not touched.
+TEST(ServerLimits, StallWatchdogCancelsAStreamWhoseClientStoppedReading) {
+    server::ServerOptions o = test_options();
+    o.limits.stall_timeout_ms = 1000;
+    auto server = start_server(o);
+    BackgroundStream healthy(server->port());
+    ASSERT_TRUE(healthy.advances(2));
+
+    constexpr int kW = 320, kH = 180;  // raw frames of 172 KB fill the small windows at once
+    grpc::ChannelArguments args = net::client_channel_args();
+    args.SetInt(GRPC_ARG_HTTP2_BDP_PROBE, 0);
+    args.SetInt(GRPC_ARG_HTTP2_STREAM_LOOKAHEAD_BYTES, 64 * 1024);
+    StreamClient client(channel_to(server->port(), args));
+    v1::SessionConfig config = session_config(v1::ENCODING_RAW_RGB8);
+    config.set_width(kW);
+    config.set_height(kH);
+    config.mutable_pipeline()->set_cache(v1::CACHE_MODE_OFF);
+    ASSERT_TRUE(client.open(config));
+    const auto path = uav_path(20, kW, kH);
+    const auto begin = std::chrono::steady_clock::now();
+    std::uint64_t seq = 0;
+    // Poses (acknowledging everything, reading nothing) until the server gives up on us.
+    while (std::chrono::steady_clock::now() - begin < std::chrono::seconds(30)) {
+        ++seq;
+        if (!client.send(frame_request(seq, path[seq % path.size()], seq - 1))) break;
+        if (server->stats().streams_stalled > 0) break;
+        std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    }
+    const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - begin).count();
+    EXPECT_EQ(server->stats().streams_stalled, 1u);
+    EXPECT_LT(seconds, 20.0);  // about 1-2 s: the windows fill within a few frames, then 1 s
+    // Cancelled: trailers cannot pass a stream that is not read, so the client sees CANCELLED.
+    const grpc::Status status = client.finish();
+    EXPECT_EQ(status.error_code(), grpc::StatusCode::CANCELLED) << status.error_message();
+    std::printf("stall watchdog: cancelled after %.2f s (%llu poses sent); client status %d '%s'\n", seconds,
+                static_cast<unsigned long long>(seq), static_cast<int>(status.error_code()),
+                status.error_message().c_str());
+    EXPECT_TRUE(eventually([&] { return server->stats().streams_open == 1; })) << server->stats().streams_open;
+    EXPECT_TRUE(eventually([&] { return server->stats().sessions_active == 1; }));
+    EXPECT_TRUE(healthy.advances(3));
+    healthy.stop();
+    EXPECT_FALSE(healthy.failed()) << healthy.failure();
+    EXPECT_EQ(server->stats().streams_stalled, 1u);  // the healthy stream never stalled
+}
+
+/// Unary renders reuse pooled renderers (at most render_workers of them) and stay exact.
+TEST(ServerLimits, UnaryRendersReuseRenderers) {
+    auto server = start_server();
+    auto stub = v1::RenderService::NewStub(channel_to(server->port()));
+    v1::RenderRequest request;
+    *request.mutable_config() = session_config(v1::ENCODING_PNG);
+    *request.mutable_frame() = frame_request(1, uav_path(4)[1], 0);
+    std::string first;
+    for (int i = 0; i < 4; ++i) {
+        grpc::ClientContext context;
+        v1::Frame frame;
+        const grpc::Status status = stub->Render(&context, request, &frame);
+        ASSERT_TRUE(status.ok()) << status.error_message();
+        if (i == 0) first = frame.data();
+        EXPECT_EQ(frame.data(), first) << "render " << i << " differs";
+        EXPECT_EQ(server->stats().pooled_renderers, 1);
+    }
+    // Concurrent calls take more renderers; the pool keeps at most render_workers (2).
+    std::vector<std::thread> threads;
+    std::atomic<int> ok{0};
+    for (int t = 0; t < 6; ++t)
+        threads.emplace_back([&] {
+            grpc::ClientContext context;
+            v1::Frame frame;
+            if (stub->Render(&context, request, &frame).ok() && frame.data() == first) ++ok;
+        });
+    for (auto& t : threads) t.join();
+    EXPECT_EQ(ok, 6);
+    EXPECT_GE(server->stats().pooled_renderers, 1);
+    EXPECT_LE(server->stats().pooled_renderers, 2);
+}
+
+}  // namespace
+}  // namespace catgs::test
