@@ -874,6 +874,26 @@ TEST(SceneIoBadPly, HugeCountsFailFastWithoutAllocating) {
     expect_ply_error(before.bytes(), {"negative list length -1", "record 0, property 'ids'"});
 }
 
+// LoadOptions::max_records (the fuzz targets' allocation cap): a file that declares more
+// records is refused before anything is allocated for it; the default changes nothing.
+TEST(SceneIoLimits, MaxRecordsRefusesLargerFiles) {
+    const std::string ply = tmp_path("limit.ply");
+    write_file(ply, graphdeco_ply(3, 0).bytes());
+    catgs::LoadOptions options;
+    EXPECT_EQ(options.max_records, std::numeric_limits<std::uint64_t>::max());
+    options.max_records = 2;
+    expect_error([&] { catgs::read_ply(ply, options); }, ply,
+                 {"3 records exceed the limit of 2", "(LoadOptions::max_records)"});
+    options.max_records = 3;
+    EXPECT_EQ(catgs::read_ply(ply, options).count(), 3u);
+
+    const std::string splat = tmp_path("limit.splat");
+    write_file(splat, splat_bytes({SplatRecord{}, SplatRecord{}}));
+    options.max_records = 1;
+    expect_error([&] { catgs::read_splat(splat, options); }, splat,
+                 {"2 records exceed the limit of 1", "(LoadOptions::max_records)"});
+}
+
 TEST(SceneIoBadPly, AsciiMissingExtraAndUnparsableValues) {
     Ply ply = graphdeco_ply(5, 0, "ascii");
     const std::string header = ply.header();
@@ -940,6 +960,26 @@ TEST(SceneIoBadPly, ZeroNormQuaternion) {
     Ply ply = graphdeco_ply(6, 0);
     for (int c = 0; c < 4; ++c) ply.rows[4]["rot_" + std::to_string(c)] = 0.0;
     expect_ply_error(ply.bytes(), {"zero-norm quaternion", "record 4", "'rot_0'..'rot_3'"});
+}
+
+// Found by fuzzing (fuzz_ply): double components below ~1e-154 have a subnormal norm^2 that
+// kept only a few bits, and the "normalised" quaternion was off unit length by ~1e-4.
+TEST(SceneIoPly, TinyQuaternionsAreNormalised) {
+    Ply ply = graphdeco_ply(1, 0, "binary_little_endian", "double");
+    ply.rows[0]["rot_0"] = 1e-200;
+    ply.rows[0]["rot_1"] = 1.5e-160;
+    ply.rows[0]["rot_2"] = -1.5e-160;
+    ply.rows[0]["rot_3"] = 0.0;
+    const std::string path = tmp_path("tiny.ply");
+    write_file(path, ply.bytes());
+    const catgs::Scene s = catgs::read_ply(path, absolute());
+    ASSERT_EQ(s.count(), 1u);
+    EXPECT_EQ(s.rotations[1], static_cast<float>(std::sqrt(0.5)));
+    EXPECT_EQ(s.rotations[2], -static_cast<float>(std::sqrt(0.5)));
+    EXPECT_EQ(s.rotations[3], 0.0f);
+    double norm2 = 0;
+    for (int c = 0; c < 4; ++c) norm2 += double{s.rotations[c]} * s.rotations[c];
+    EXPECT_NEAR(norm2, 1.0, 1e-6);
 }
 
 TEST(SceneIoDrop, InvalidRecordsAreDroppedAndCounted) {

@@ -242,6 +242,10 @@ SceneBuilder::SceneBuilder(const std::string& path, std::uint64_t records, int s
     // allocation below exact even where size_t is narrower than the 64-bit count.
     if (records > std::numeric_limits<std::size_t>::max() / (sizeof(float) * kMaxFields + 3 * sizeof(double)))
         fail(path, std::to_string(records) + " records are too many to hold", "");
+    if (records > options.max_records)
+        fail(path,
+             std::to_string(records) + " records exceed the limit of " + std::to_string(options.max_records),
+             "LoadOptions::max_records");
     scene_.sh_degree = sh_degree;
     scene_.resize(static_cast<std::size_t>(records));
     world_.resize(3 * static_cast<std::size_t>(records));
@@ -289,11 +293,24 @@ void SceneBuilder::add(const double* v, std::uint64_t record) {
         reject_quaternion(norm2 > 0.0 ? "quaternion norm overflows" : "zero-norm quaternion", record);
         return;
     }
+    const double* q = v + kFieldRot;
+    double rescaled[4];
+    if (norm2 < std::numeric_limits<double>::min()) {
+        // A subnormal norm^2 (components below ~1e-154, from double properties) keeps only a
+        // few significant bits: normalise the quaternion divided by its largest component.
+        double largest = 0.0;
+        for (int c = 0; c < 4; ++c) largest = std::max(largest, std::fabs(q[c]));
+        norm2 = 0.0;
+        for (int c = 0; c < 4; ++c) {
+            rescaled[c] = q[c] / largest;
+            norm2 += rescaled[c] * rescaled[c];
+        }
+        q = rescaled;
+    }
     float rotation[4];
     bool already_unit = std::fabs(norm2 - 1.0) <= kUnitNormSquaredSlack;
     double inverse_norm = already_unit ? 1.0 : 1.0 / std::sqrt(norm2);
-    for (int c = 0; c < 4; ++c)
-        rotation[c] = static_cast<float>(already_unit ? v[kFieldRot + c] : v[kFieldRot + c] * inverse_norm);
+    for (int c = 0; c < 4; ++c) rotation[c] = static_cast<float>(already_unit ? q[c] : q[c] * inverse_norm);
 
     const int sh_fields = fields_ - kFieldSh;
     float* sh = scene_.sh.data() + kept_ * static_cast<std::size_t>(sh_fields);

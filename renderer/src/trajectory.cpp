@@ -155,6 +155,10 @@ Flight parse_flight(const std::string& spec) {
     if (f.pitch < -90 || f.pitch > 90) throw Error(spec + ": pitch must be in [-90, 90] degrees");
     if (f.frames < 1 || f.frames > kMaxFrames)
         throw Error(spec + ": frames must be in [1, " + std::to_string(kMaxFrames) + "]");
+    // Positions along the flight are speed * frame / fps, evaluated in this order: they must
+    // stay finite (e.g. fps=1e-308, or speed=1e308 with 3 frames).
+    if (!std::isfinite(f.speed * static_cast<double>(f.frames) / f.fps))
+        throw Error(spec + ": the flight is too long: speed * frames / fps is not finite");
     return f;
 }
 

@@ -7,6 +7,8 @@
 #pragma once
 
 #include <cstddef>
+#include <cstdint>
+#include <limits>
 #include <string>
 
 #include "catgs/progress.hpp"
@@ -25,6 +27,10 @@ struct LoadOptions {
     /// chunks (partition_into_chunks), for chunk-level culling. The single-format readers
     /// keep the file's order.
     bool chunks = true;
+    /// A file that declares more records than this is refused before anything is allocated
+    /// for it. The default leaves only the bound the file size sets; fuzz targets and
+    /// memory-capped callers lower it.
+    std::uint64_t max_records = std::numeric_limits<std::uint64_t>::max();
     Progress progress;
 };
 
