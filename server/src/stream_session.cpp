@@ -14,6 +14,9 @@ namespace {
 /// make the server queue without bound: beyond this many waiting, errors are only counted.
 constexpr std::size_t kMaxQueuedErrorFrames = 8;
 
+/// Bit-for-bit equality: a client that repeats a pose sends the same doubles.
+bool same_pose(const Pose& a, const Pose& b) { return a.rotation == b.rotation && a.translation == b.translation; }
+
 double ms_between(StreamSession::Clock::time_point a, StreamSession::Clock::time_point b) {
     return std::chrono::duration<double, std::milli>(b - a).count();
 }
@@ -31,6 +34,12 @@ const char* kind_name(const v1::StreamRequest& r) {
 StreamSession::StreamSession(ServerCore& core, grpc::CallbackServerContext* context)
     : core_(core), context_(context), id_(core.counters().next_session_id++), started_(Clock::now()),
       peer_(context->peer()) {
+    // The proxy's affinity key (deploy/envoy*.yaml), logged so that an operator can follow a
+    // reconnecting viewer across sessions. gRPC admits only printable ASCII in header values;
+    // the length is bounded here.
+    const auto& metadata = context->client_metadata();
+    if (auto it = metadata.find("x-catgs-session"); it != metadata.end())
+        peer_ += " (x-catgs-session " + std::string(it->second.data(), std::min<std::size_t>(it->second.size(), 128)) + ")";
     tokens_ = std::max(1.0, core_.options().limits.max_pose_rate);  // a full bucket: one second's burst
     tokens_at_ = started_;
 }
@@ -300,6 +309,7 @@ void StreamSession::initialise() {
 void StreamSession::render_next() {
     PendingPose pose;
     Actions actions;
+    std::optional<std::string> resend;  // the bytes of the last frame, when its pose repeats
     {
         std::lock_guard lock(mutex_);
         if (finish_wanted_ || finished_ || !pending_ || phase_ != Phase::open) {
@@ -311,7 +321,17 @@ void StreamSession::render_next() {
             pending_.reset();
             unacked_.push_back(pose.frame.sequence);
             ++encoding_;
+            if (last_sent_pose_ && same_pose(*last_sent_pose_, pose.frame.camera.pose)) {
+                resend = last_sent_data_;
+                render_busy_ = false;
+                plan_locked(actions);  // the next pose may render meanwhile
+            }
         }
+    }
+    if (resend) {
+        run(actions);
+        resend_last(std::move(pose), std::move(*resend));
+        return;
     }
     if (pose.frame.sequence == 0) {
         run(actions);
@@ -385,7 +405,8 @@ void StreamSession::render_next() {
     cache->set_split_k(frame_stats.split_k);
     const Clock::time_point received = pose.received;
     const bool posted = core_.encode_pool().post(
-        [self = shared_from_this(), image = std::move(image), frame = std::move(frame), received]() mutable {
+        [self = shared_from_this(), image = std::move(image), frame = std::move(frame), received,
+         view = pose.frame.camera.pose]() mutable {
             const Clock::time_point start = Clock::now();
             try {
                 encode_image(image, self->setup_.encode, *frame.mutable_data());
@@ -397,7 +418,7 @@ void StreamSession::render_next() {
             const Clock::time_point done = Clock::now();
             frame.mutable_timings()->set_encode_ms(ms_between(start, done));
             frame.mutable_timings()->set_total_ms(ms_between(received, done));
-            self->deliver(std::move(frame), true);
+            self->deliver(std::move(frame), true, &view);
         });
     if (!posted) {
         std::lock_guard lock(mutex_);
@@ -406,7 +427,27 @@ void StreamSession::render_next() {
     }
 }
 
-void StreamSession::deliver(v1::Frame frame, bool image) {
+void StreamSession::resend_last(PendingPose pose, std::string data) {
+    // The session's image size and encoding are fixed, so the same pose is the same frame.
+    v1::Frame frame;
+    frame.set_sequence(pose.frame.sequence);
+    frame.set_encoding(to_proto(setup_.encode.format));
+    frame.set_width(static_cast<std::uint32_t>(setup_.intrinsics.width));
+    frame.set_height(static_cast<std::uint32_t>(setup_.intrinsics.height));
+    frame.set_client_timestamp_us(pose.frame.client_timestamp_us);
+    *frame.mutable_data() = std::move(data);
+    const Clock::time_point now = Clock::now();
+    frame.mutable_timings()->set_queue_ms(ms_between(pose.received, now));
+    frame.mutable_timings()->set_total_ms(ms_between(pose.received, now));
+    frame.mutable_cache()->set_reused_previous(true);
+    {
+        std::lock_guard lock(mutex_);
+        ++stats_.frames_reused;
+    }
+    deliver(std::move(frame), true, &pose.frame.camera.pose);
+}
+
+void StreamSession::deliver(v1::Frame frame, bool image, const Pose* pose) {
     Actions actions;
     {
         std::lock_guard lock(mutex_);
@@ -431,6 +472,8 @@ void StreamSession::deliver(v1::Frame frame, bool image) {
                 drop_unacked_locked(next_image_->sequence());
             }
             next_image_ = std::move(frame);
+            if (pose) next_image_pose_ = *pose;
+            else next_image_pose_.reset();
             newest_image_sequence_ = sequence;
         }
         plan_locked(actions);
@@ -466,10 +509,10 @@ void StreamSession::OnDone() {
         std::lock_guard lock(mutex_);
         const double frames = static_cast<double>(stats_.frames_sent);
         spdlog::info("session {} closed: {} '{}' after {:.1f} s; {} requests, {} frames ({:.1f}/s), {} poses and {} "
-                     "frames coalesced, {} errors, render {:.1f} ms, encode {:.1f} ms (means)",
+                     "frames coalesced, {} re-sent for a repeated pose, {} errors, render {:.1f} ms, encode {:.1f} ms (means)",
                      id_, static_cast<int>(final_status_.error_code()), final_status_.error_message(), seconds,
                      stats_.requests_received, stats_.frames_sent, seconds > 0 ? frames / seconds : 0.0,
-                     stats_.poses_coalesced, stats_.frames_coalesced, stats_.frame_errors,
+                     stats_.poses_coalesced, stats_.frames_coalesced, stats_.frames_reused, stats_.frame_errors,
                      frames > 0 ? render_ms_sum_ / frames : 0.0, frames > 0 ? encode_ms_sum_ / frames : 0.0);
     }
     core_.remove_stream(this);
@@ -541,6 +584,8 @@ void StreamSession::plan_locked(Actions& actions) {
                 } else if (next_image_) {
                     in_flight_ = std::move(*next_image_);
                     next_image_.reset();
+                    in_flight_pose_ = std::move(next_image_pose_);
+                    next_image_pose_.reset();
                     ++stats_.frames_sent;
                     core_.counters().frames_sent++;
                     chosen = true;
@@ -552,6 +597,7 @@ void StreamSession::plan_locked(Actions& actions) {
                     out->set_frames_coalesced(stats_.frames_coalesced);
                     out->set_frames_sent(stats_.frames_sent);
                     out->set_frame_errors(stats_.frame_errors);
+                    out->set_frames_reused(stats_.frames_reused);
                     write_in_flight_ = true;
                     write_started_ = Clock::now();
                     in_flight_bytes_ = static_cast<std::int64_t>(in_flight_.data().size());
@@ -583,6 +629,13 @@ void StreamSession::run(const Actions& actions) {
         // in_flight_ is ours until OnWriteDone (write_in_flight_ was set with it): serialize
         // it outside the lock, then let its copy of the image go.
         serialize_message(in_flight_, &in_flight_buffer_);
+        if (!in_flight_.has_error()) {
+            // Keep the written image's bytes for a repeated pose; the rest of it goes.
+            std::lock_guard lock(mutex_);
+            last_sent_data_.swap(*in_flight_.mutable_data());
+            last_sent_pose_ = std::move(in_flight_pose_);
+            in_flight_pose_.reset();
+        }
         in_flight_.Clear();
         StartWrite(&in_flight_buffer_, grpc::WriteOptions().set_no_compression());
     }

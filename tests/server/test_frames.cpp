@@ -1,6 +1,8 @@
 // Frame correctness: 30 poses of a UAV flight streamed in lock step; every decoded frame is
 // compared with this test's own CPU renderer, fed the same cameras, hints and options in the
 // same order (so its inter-frame cache makes the same decisions as the server's).
+#include <cmath>
+
 #include "server_test_util.hpp"
 
 namespace catgs::test {
@@ -108,6 +110,48 @@ TEST_F(FramesTest, RawFramesAreExactWithFixedWindowAndSplit) {
 
 TEST_F(FramesTest, JpegQuality90IsCloseToTheReference) {
     stream_and_compare(session_config(v1::ENCODING_JPEG, 90), false, true);
+}
+
+// A hovering drone or a paused viewer repeats its pose: the server re-sends the last frame's
+// bytes without rendering, and renders again as soon as the pose changes (by one ulp).
+TEST_F(FramesTest, RepeatedPoseResendsTheLastFrameUnrendered) {
+    const auto path = uav_path(3);
+    StreamClient client(channel_to(server_->port()));
+    ASSERT_TRUE(client.open(session_config(v1::ENCODING_PNG)));
+    struct Step {
+        int pose;     // index into path
+        bool nudged;  // camera centre x one ulp further
+        bool reused;  // expected
+    };
+    const std::vector<Step> requests = {{0, false, false}, {0, false, true}, {0, false, true},
+                                        {1, false, false}, {1, true, false},  {1, true, true}};
+    std::vector<v1::Frame> frames;
+    std::uint64_t ack = 0;
+    for (std::size_t i = 0; i < requests.size(); ++i) {
+        v1::FrameRequest request = frame_request(i + 1, path[requests[i].pose], ack);
+        auto* position = request.mutable_pose()->mutable_position();
+        if (requests[i].nudged) position->set_x(std::nextafter(position->x(), 1e300));
+        ASSERT_TRUE(client.send(request));
+        v1::Frame frame;
+        ASSERT_TRUE(client.stream->Read(&frame)) << "frame " << i;
+        ASSERT_FALSE(frame.has_error()) << frame.error().message();
+        ASSERT_EQ(frame.sequence(), i + 1);
+        EXPECT_EQ(frame.cache().reused_previous(), requests[i].reused) << "frame " << i;
+        if (requests[i].reused) {
+            EXPECT_EQ(frame.data(), frames.back().data()) << "frame " << i;
+            EXPECT_EQ(frame.cache().render_length(), 0u);
+            EXPECT_EQ(frame.timings().render_ms(), 0.0);
+        } else {
+            EXPECT_GT(frame.cache().render_length(), 0u) << "frame " << i;
+        }
+        EXPECT_EQ(frame.stats().frames_sent(), i + 1);
+        ack = frame.sequence();
+        frames.push_back(std::move(frame));
+    }
+    EXPECT_EQ(frames.back().stats().frames_reused(), 3u);
+    // The re-sent bytes are the frame the renderer draws for that pose.
+    EXPECT_EQ(decode_frame(frames[2]).rgb, decode_frame(frames[0]).rgb);
+    EXPECT_TRUE(client.close().ok());
 }
 
 TEST_F(FramesTest, PipelineOptionsMapOntoRenderOptions) {

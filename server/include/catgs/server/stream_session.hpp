@@ -75,7 +75,11 @@ private:
     void handle_frame(const v1::FrameRequest& request);
     void initialise();   // render pool: make the renderer
     void render_next();  // render pool: render the newest pose
-    void deliver(v1::Frame frame, bool image);  // encoder pool or reactions: queue for writing
+    /// Encoder pool or reactions: queue for writing. `pose` is the view an image frame shows.
+    void deliver(v1::Frame frame, bool image, const Pose* pose = nullptr);
+    /// Render pool: answers `pose` with the bytes of the last frame sent, which showed the same
+    /// view, instead of rendering it again.
+    void resend_last(PendingPose pose, std::string data);
 
     // The helpers below require mutex_ held. Each returns work to do after unlocking.
     struct Actions {
@@ -126,6 +130,11 @@ private:
     grpc::ByteBuffer in_flight_buffer_;   // owned by gRPC between StartWrite and OnWriteDone
     std::int64_t in_flight_bytes_ = 0;
     std::optional<v1::Frame> next_image_; // latest wins
+    // The view of next_image_ and of in_flight_, and the last image written with its bytes
+    // (moved out of the written message, not copied). A request for exactly that pose, bit
+    // for bit (a hovering drone, a paused viewer), is answered with those bytes unrendered.
+    std::optional<Pose> next_image_pose_, in_flight_pose_, last_sent_pose_;
+    std::string last_sent_data_;
     std::deque<v1::Frame> next_errors_;
     std::uint64_t newest_image_sequence_ = 0;  // newest image frame queued or written
     int buffered_frames_ = 0;
@@ -145,7 +154,7 @@ private:
     // Session statistics (for Frame.stats and the close log line).
     struct Counters {
         std::uint64_t requests_received = 0, poses_coalesced = 0, frames_coalesced = 0, frames_sent = 0,
-                      frame_errors = 0;
+                      frame_errors = 0, frames_reused = 0;
     };
     Counters stats_;
     double render_ms_sum_ = 0, encode_ms_sum_ = 0;
