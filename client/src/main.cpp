@@ -81,6 +81,16 @@ struct Connection {
     std::string tls_cert, tls_key;  ///< PEM client certificate and key (mTLS)
     bool tls = false;
     client::RetryPolicy retry;
+    /// Sent as metadata x-catgs-session on every call: a front proxy (deploy/envoy*.yaml)
+    /// routes calls with the same value to the same server, so a reconnecting viewer finds its
+    /// scene warm there. Empty: a random id per run.
+    std::string session_id;
+
+    /// Adds the metadata every call carries: the bearer token and the session id.
+    void add_metadata(grpc::ClientContext& context, const std::string& authorization) const {
+        if (!authorization.empty()) context.AddMetadata("authorization", authorization);
+        if (!session_id.empty()) context.AddMetadata(client::kSessionHeader, session_id);
+    }
 
     std::string authorization() const {
         if (token_file.empty()) return "";
@@ -205,7 +215,7 @@ grpc::Status scene_bounds(const Connection& conn, const std::string& scene, Boun
     std::mt19937_64 random(conn.retry.seed ? conn.retry.seed : std::random_device{}());
     for (int attempt = 0;; ++attempt) {
         grpc::ClientContext context;
-        if (!auth.empty()) context.AddMetadata("authorization", auth);
+        conn.add_metadata(context, auth);
         context.set_deadline(std::chrono::system_clock::now() + kConnectTimeout);
         s = stub->GetScene(&context, request, &info);
         if (s.error_code() != grpc::StatusCode::UNAVAILABLE || attempt >= conn.retry.retries || g_stop) break;
@@ -232,6 +242,7 @@ client::StreamPlan make_plan(const Connection& conn, const SessionFlags& f, cons
     plan.flight_plan = f.flight_plan;
     plan.velocity = !f.no_velocity;
     plan.authorization = conn.authorization();
+    plan.session_id = conn.session_id;
     return plan;
 }
 
@@ -335,6 +346,8 @@ int cmd_load(const Connection& conn, const SessionFlags& f, int streams, double 
             // Stagger the streams along the path so they do not render identical frames.
             std::rotate(mine.path.begin(), mine.path.begin() + static_cast<long>((i * mine.path.size()) / streams),
                         mine.path.end());
+            // One viewer per stream: each keeps its own server behind a proxy.
+            mine.session_id = conn.session_id + "-" + std::to_string(i);
             client::RetryPolicy retry = conn.retry;
             if (retry.seed) retry.seed += static_cast<std::uint64_t>(i);
             results[static_cast<std::size_t>(i)] = client::run_stream_with_retries(
@@ -452,8 +465,7 @@ int cmd_scenes(const Connection& conn, const std::string& action, const std::str
                bool drop_invalid, bool json) {
     auto stub = v1::SceneService::NewStub(conn.channel());
     grpc::ClientContext context;
-    const std::string auth = conn.authorization();
-    if (!auth.empty()) context.AddMetadata("authorization", auth);
+    conn.add_metadata(context, conn.authorization());
     context.set_wait_for_ready(true);
     // Loading a large scene takes a while; the rest is immediate.
     context.set_deadline(std::chrono::system_clock::now() + (action == "load" ? std::chrono::seconds(600) : kConnectTimeout));
@@ -521,6 +533,10 @@ int main(int argc, char** argv) {
     app.require_subcommand(1);
     app.add_option("--server", conn.server, "server address host:port")->capture_default_str();
     app.add_option("--token-file", conn.token_file, "send 'authorization: Bearer <first line of the file>'");
+    app.add_option("--session-id", conn.session_id,
+                   "sent as metadata 'x-catgs-session' on every call, so that a front proxy sends a reconnecting "
+                   "client back to the server that holds its scene warm (load: ID-N for stream N; default: random "
+                   "per run)");
     app.add_flag("--tls", conn.tls, "connect with TLS (system roots unless --tls-ca)");
     app.add_option("--tls-ca", conn.tls_ca, "PEM CA bundle to verify the server (implies --tls)");
     app.add_option("--tls-cert", conn.tls_cert, "PEM client certificate chain for mutual TLS (with --tls-key; implies --tls)");
@@ -572,6 +588,16 @@ int main(int argc, char** argv) {
     }
     if (backoff_ms < 1 || max_backoff_ms < backoff_ms || max_backoff_ms > 600'000) {
         std::cerr << "catgs-client: --backoff-ms/--max-backoff-ms: expected 1 <= backoff <= max backoff <= 600000\n";
+        return kExitBadInput;
+    }
+    if (conn.session_id.empty()) {
+        char id[17];
+        std::snprintf(id, sizeof id, "%016llx", static_cast<unsigned long long>(std::random_device{}()) << 32 ^
+                                                    static_cast<unsigned long long>(std::random_device{}()));
+        conn.session_id = id;
+    } else if (!client::valid_session_id(conn.session_id)) {
+        std::cerr << "catgs-client: --session-id: expected 1.." << client::kMaxSessionIdLength
+                  << " printable ASCII characters (an HTTP/2 header value)\n";
         return kExitBadInput;
     }
     conn.retry.retries = retries;

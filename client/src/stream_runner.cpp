@@ -38,6 +38,7 @@ StreamResult run_stream(const std::shared_ptr<grpc::Channel>& channel, const Str
     auto stub = v1::RenderService::NewStub(channel);
     grpc::ClientContext context;
     if (!plan.authorization.empty()) context.AddMetadata("authorization", plan.authorization);
+    if (!plan.session_id.empty()) context.AddMetadata(kSessionHeader, plan.session_id);
     const Clock::time_point start = Clock::now();
     auto stream = stub->Stream(&context);
     v1::StreamRequest open;

@@ -22,6 +22,18 @@ namespace catgs::client {
 
 using Clock = std::chrono::steady_clock;
 
+/// Metadata that front proxies route on (deploy/envoy-host.yaml, deploy/k8s/envoy.yaml): calls
+/// with the same value reach the same server.
+inline constexpr const char* kSessionHeader = "x-catgs-session";
+inline constexpr std::size_t kMaxSessionIdLength = 128;
+/// 1..kMaxSessionIdLength printable ASCII characters: a valid HTTP/2 header value.
+inline bool valid_session_id(const std::string& id) {
+    if (id.empty() || id.size() > kMaxSessionIdLength) return false;
+    for (char c : id)
+        if (c < 0x20 || c > 0x7e) return false;
+    return true;
+}
+
 struct StreamPlan {
     v1::SessionConfig config;
     std::vector<Camera> path;     ///< poses, in order; repeated cyclically up to `poses`
@@ -31,6 +43,7 @@ struct StreamPlan {
     int flight_plan = 0;          ///< future poses sent with each request
     bool velocity = true;         ///< send the path's velocity
     std::string authorization;    ///< "Bearer ..." or empty
+    std::string session_id;       ///< sent as kSessionHeader, or empty
     Clock::duration max_duration = std::chrono::hours(24);
     std::size_t first = 0;        ///< index of the first pose to send (a resumed stream)
 };

@@ -293,10 +293,18 @@ TEST_F(TlsTest, BinariesWithMutualTlsAndToken) {
     const std::vector<std::string> tls = {"--tls-ca", cert("ca.crt").string(), "--tls-cert", cert("client.crt").string(),
                                           "--tls-key", cert("client.key").string()};
     std::vector<std::string> ok = tls;
-    ok.insert(ok.end(), {"--token-file", token.string()});
+    ok.insert(ok.end(), {"--token-file", token.string(), "--session-id", "viewer-7"});
     auto [code, out] = client(ok);
     EXPECT_EQ(code, 0) << out;
     EXPECT_NE(out.find("3 frames"), std::string::npos) << out;
+    // The proxy affinity header reached the server (it logs it with the session).
+    EXPECT_NE(server.output().find("(x-catgs-session viewer-7)"), std::string::npos) << server.output();
+    // A header value must be printable ASCII: refused before connecting, exit 2.
+    std::vector<std::string> bad_id = ok;
+    bad_id.back() = "tab\there";
+    std::tie(code, out) = client(bad_id);
+    EXPECT_EQ(code, 2) << out;
+    EXPECT_NE(out.find("--session-id: expected 1..128 printable ASCII characters"), std::string::npos) << out;
     // Without a client certificate: the handshake fails, UNAVAILABLE, exit 3.
     std::tie(code, out) = client({"--tls-ca", cert("ca.crt").string(), "--token-file", token.string()});
     EXPECT_EQ(code, 3) << out;
