@@ -175,7 +175,7 @@ __global__ void preprocess_kernel(DeviceSceneView scene, ChunkSpace space, const
             }
         }
         if (tiles > 0) {
-            sort_depth[slot] = static_cast<float>(poses[first_valid_pose(valid)].depth);
+            sort_depth[slot] = poses[first_valid_pose(valid)].key_depth;
             // At the actual pose: pose 0's geometry unless the window lowered the near plane;
             // the SH colour only now that the Gaussian is known to touch a tile.
             const GaussianRef g = gaussian_ref(scene, i);
@@ -310,7 +310,7 @@ __global__ void rekey_kernel(std::uint64_t n, const std::uint64_t* emitted_keys,
     const std::uint32_t tile = key_tile(emitted_keys[j]);
     // Exact culling shares one list among all tiles: nothing to filter.
     const bool keep = culling == Culling::exact || (p.opacity > T(0) && touches_tile(p, culling, view, tile));
-    keys[j] = make_sort_key(keep ? tile : parked_tile(tiles), static_cast<float>(p.depth));
+    keys[j] = make_sort_key(keep ? tile : parked_tile(tiles), p.key_depth);
     values[j] = index;
 }
 

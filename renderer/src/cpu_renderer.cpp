@@ -199,7 +199,7 @@ void CpuRenderer<T>::preprocess(const Scene& scene, const View<T>& actual, const
                 // Keys sort by the depth at the first pose where the Gaussian is visible (the key
                 // pose, so the key frame itself is exact); the envelope needs the nearest depth
                 // at any pose.
-                sort_depth_[i] = static_cast<float>(poses[first_valid_pose(valid)].depth);
+                sort_depth_[i] = poses[first_valid_pose(valid)].key_depth;
                 for (int k = 0; k < w; ++k)
                     if (valid >> k & 1u) local_min = std::min(local_min, static_cast<double>(poses[k].depth));
                 // At the actual pose: pose 0's geometry unless the window lowered the near plane;
@@ -286,7 +286,7 @@ void CpuRenderer<T>::rekey_pairs(const View<T>& view, Culling culling) {
             const std::uint32_t tile = key_tile(emitted_keys_[j]);
             // Exact culling shares one list among all tiles: nothing to filter.
             const bool keep = culling == Culling::exact || (p.opacity > 0 && touches_tile(p, culling, view, tile));
-            keys_[j] = make_sort_key(keep ? tile : parked_tile(tiles), static_cast<float>(p.depth));
+            keys_[j] = make_sort_key(keep ? tile : parked_tile(tiles), p.key_depth);
         }
     });
 }

@@ -22,6 +22,11 @@ struct Projected {
     Vec3<T> colour;  ///< RGB from SH, >= 0
     T opacity;       ///< activated opacity sigma
     T depth;         ///< view-space z, > near plane
+    /// float(view-space z computed in double): the sort key, identical in every precision.
+    /// Float depths of nearly coplanar neighbours (a road marking on asphalt, a facade seen at
+    /// 45 degrees) land within one float ulp of each other and can swap order against the
+    /// double reference, which changed single pixels by up to 35 levels on the built-in city.
+    float key_depth;
 };
 
 /// The per-Gaussian inputs, as pointers into the Scene's arrays at index i.
@@ -53,6 +58,12 @@ CATGS_HD bool project_geometry(const GaussianRef& g, const View<T>& view, Projec
     const Vec3<T> p{static_cast<T>(g.position[0]), static_cast<T>(g.position[1]), static_cast<T>(g.position[2])};
     const Vec3<T> pc = view.rotation * p + view.translation;
     if (!(pc.z > view.near_plane)) return false;  // also rejects NaN
+    // The same sum in the same order as pc.z in double (Mat3 * Vec3 + translation), so the
+    // double renderer's keys are unchanged: 3 double multiply-adds per Gaussian and pose,
+    // done first so that no double stays live through the covariance below.
+    out.key_depth = static_cast<float>(view.depth_row[0] * static_cast<double>(g.position[0]) +
+                                       view.depth_row[1] * static_cast<double>(g.position[1]) +
+                                       view.depth_row[2] * static_cast<double>(g.position[2]) + view.depth_offset);
 
     // Jacobian of the projection at the clamped direction: far off-screen Gaussians would
     // otherwise get 2D covariances dominated by the 1/z^2 terms.

@@ -27,6 +27,10 @@ struct View {
     /// gsplat's principal-point-aware form of graphdeco's 1.3 * tan(fov/2): the image edge
     /// plus 0.3 of the half-width tangent on each side.
     T clamp_left, clamp_right, clamp_top, clamp_bottom;
+    /// The depth row of the world-to-camera rotation and the depth translation, in double in
+    /// every precision: Projected::key_depth, the sort key, is computed from them.
+    double depth_row[3];
+    double depth_offset;
 };
 
 inline int tiles_for(int pixels) { return (pixels + kTileSize - 1) / kTileSize; }
@@ -44,6 +48,8 @@ View<T> make_view(const Camera& camera, const std::array<double, 3>& origin, dou
     for (int i = 0; i < 3; ++i)
         tr[i] = r[3 * i] * origin[0] + r[3 * i + 1] * origin[1] + r[3 * i + 2] * origin[2] + t[i];
     v.translation = {static_cast<T>(tr[0]), static_cast<T>(tr[1]), static_cast<T>(tr[2])};
+    for (int j = 0; j < 3; ++j) v.depth_row[j] = r[6 + j];
+    v.depth_offset = tr[2];
     auto c = camera_centre(camera.pose);
     v.centre = {static_cast<T>(c[0] - origin[0]), static_cast<T>(c[1] - origin[1]), static_cast<T>(c[2] - origin[2])};
     v.fx = static_cast<T>(k.fx);
