@@ -131,7 +131,7 @@ struct SessionFlags {
     double fov = 70;
     std::string encoding = "jpeg";
     int quality = 85;
-    std::string cache = "speculative";
+    std::string cache = "off";
     std::string window = "adaptive";
     std::string split = "off";
     int max_unacked = 2;
@@ -151,7 +151,7 @@ void add_session_flags(CLI::App* app, SessionFlags& f) {
     app->add_option("--fov", f.fov, "horizontal field of view, degrees")->capture_default_str();
     app->add_option("--encoding", f.encoding, "jpeg, png or raw")->capture_default_str();
     app->add_option("--quality", f.quality, "JPEG quality 1..100")->capture_default_str();
-    app->add_option("--cache", f.cache, "speculative or off")->capture_default_str();
+    app->add_option("--cache", f.cache, "off or speculative (the inter-frame cache; off is also the server's default)")->capture_default_str();
     app->add_option("--window", f.window, "adaptive or a fixed W 1..16")->capture_default_str();
     app->add_option("--split", f.split, "off, auto or k")->capture_default_str();
     app->add_option("--max-unacked", f.max_unacked, "frames the server may send ahead of our acknowledgement (1..2)")

@@ -88,7 +88,9 @@ protected:
 server::Server* FramesTest::server_ = nullptr;
 
 TEST_F(FramesTest, PngFramesAreExactWithTheSpeculativeCacheAndHints) {
-    stream_and_compare(session_config(v1::ENCODING_PNG), true, true);
+    v1::SessionConfig config = session_config(v1::ENCODING_PNG);
+    config.mutable_pipeline()->set_cache(v1::CACHE_MODE_SPECULATIVE);
+    stream_and_compare(config, true, true);
 }
 
 TEST_F(FramesTest, RawFramesAreExactWithoutCache) {
@@ -101,6 +103,7 @@ TEST_F(FramesTest, RawFramesAreExactWithoutCache) {
 
 TEST_F(FramesTest, RawFramesAreExactWithFixedWindowAndSplit) {
     v1::SessionConfig config = session_config(v1::ENCODING_RAW_RGB8);
+    config.mutable_pipeline()->set_cache(v1::CACHE_MODE_SPECULATIVE);
     config.mutable_pipeline()->set_fixed_window(4);
     config.mutable_pipeline()->set_split(v1::SPLIT_MODE_FIXED);
     config.mutable_pipeline()->set_split_k(64);
@@ -158,16 +161,16 @@ TEST_F(FramesTest, PipelineOptionsMapOntoRenderOptions) {
     v1::SessionConfig config = session_config(v1::ENCODING_PNG);
     server::SessionSetup setup;
     ASSERT_TRUE(server::parse_session_config(config, {}, "open", &setup).ok());
-    EXPECT_EQ(setup.options.catgs.cache, CacheMode::speculative);  // on by default
+    EXPECT_EQ(setup.options.catgs.cache, CacheMode::off);  // off by default (measured faster)
     EXPECT_TRUE(setup.options.catgs.adaptive_window);
     EXPECT_EQ(setup.options.culling, Culling::opacity_aware);
-    config.mutable_pipeline()->set_cache(v1::CACHE_MODE_OFF);
+    config.mutable_pipeline()->set_cache(v1::CACHE_MODE_SPECULATIVE);
     config.mutable_pipeline()->set_fixed_window(8);
     config.mutable_pipeline()->set_split(v1::SPLIT_MODE_AUTO);
     config.mutable_pipeline()->set_culling(v1::CULLING_BBOX3SIGMA);
     config.mutable_pipeline()->set_near_plane(0.5);
     ASSERT_TRUE(server::parse_session_config(config, {}, "open", &setup).ok());
-    EXPECT_EQ(setup.options.catgs.cache, CacheMode::off);
+    EXPECT_EQ(setup.options.catgs.cache, CacheMode::speculative);
     EXPECT_FALSE(setup.options.catgs.adaptive_window);
     EXPECT_EQ(setup.options.catgs.window, 8);
     EXPECT_TRUE(setup.options.catgs.split_auto);
