@@ -7,6 +7,7 @@
 
 #include "catgs/cpu_renderer.hpp"
 #include "catgs/error.hpp"
+#include "catgs/scene_ops.hpp"
 #include "catgs/stages/blend.hpp"
 #include "catgs/stages/sh.hpp"
 #include "test_util.hpp"
@@ -150,6 +151,40 @@ TEST(CpuRendererAnalytic, ShDegreesOneToThreeMatchHandComputedBasis) {
 }
 
 // The rendered colour of a degree-1 Gaussian follows the viewing direction.
+// Truncating SH to a lower degree renders exactly the scene whose higher coefficients are
+// zero (adding zero terms is exact), in float and double; the degree and size follow.
+TEST(CpuRendererAnalytic, TruncatedShRendersAsZeroedHigherCoefficients) {
+    const Scene full = test::random_scene(test::fresh_seed("truncate SH"));
+    const Camera camera = test::forward_camera(64, 48, 70.0);
+    for (int degree = 0; degree <= 2; ++degree) {
+        Scene truncated = full, zeroed = full;
+        truncate_sh(truncated, degree);
+        EXPECT_EQ(truncated.sh_degree, degree);
+        ASSERT_EQ(truncated.sh.size(), truncated.count() * 3u * static_cast<std::size_t>((degree + 1) * (degree + 1)));
+        truncated.check_consistent("truncated");
+        const std::size_t stride = full.sh_floats_per_gaussian();
+        for (std::size_t i = 0; i < full.count(); ++i)
+            for (std::size_t k = 3u * static_cast<std::size_t>((degree + 1) * (degree + 1)); k < stride; ++k)
+                zeroed.sh[i * stride + k] = 0.0f;
+        EXPECT_EQ(render<float>(truncated, camera, Culling::opacity_aware).rgb,
+                  render<float>(zeroed, camera, Culling::opacity_aware).rgb) << "degree " << degree;
+        EXPECT_EQ(render<double>(truncated, camera, Culling::opacity_aware).rgb,
+                  render<double>(zeroed, camera, Culling::opacity_aware).rgb) << "degree " << degree;
+        // ... and it is not the full scene's image (the random scene has view-dependent colour).
+        EXPECT_NE(render<float>(truncated, camera, Culling::opacity_aware).rgb,
+                  render<float>(full, camera, Culling::opacity_aware).rgb) << "degree " << degree;
+    }
+    Scene same = full;
+    truncate_sh(same, 3);
+    EXPECT_EQ(same.sh, full.sh);
+    try {
+        truncate_sh(same, -1);
+        FAIL() << "a negative degree must throw";
+    } catch (const Error& e) {
+        EXPECT_STREQ(e.what(), "SH degree -1: expected 0..3");
+    }
+}
+
 TEST(CpuRendererAnalytic, ViewDependentColourFollowsDirection) {
     Scene scene = single_gaussian({0, 0, 0}, 0.3f, 0.9f, {0, 0, 0});
     scene.sh_degree = 1;

@@ -4,6 +4,7 @@
 #include <cmath>
 #include <cstdint>
 #include <limits>
+#include <string>
 #include <vector>
 
 #include "catgs/error.hpp"
@@ -25,6 +26,20 @@ Bounds percentile_bounds(const Scene& scene, double low, double high) {
         b.max[a] = scene.origin[a] + values[hi];
     }
     return b;
+}
+
+void truncate_sh(Scene& scene, int degree) {
+    if (degree < 0) throw Error("SH degree " + std::to_string(degree) + ": expected 0..3");
+    if (degree >= scene.sh_degree) return;
+    const std::size_t old_stride = scene.sh_floats_per_gaussian();
+    const std::size_t new_stride = 3u * static_cast<std::size_t>(sh_coefficient_count(degree));
+    // In place, front to back: Gaussian i's new block never overlaps a later one's old block.
+    for (std::size_t i = 0; i < scene.count(); ++i)
+        std::copy_n(scene.sh.begin() + static_cast<std::ptrdiff_t>(i * old_stride), new_stride,
+                    scene.sh.begin() + static_cast<std::ptrdiff_t>(i * new_stride));
+    scene.sh.resize(scene.count() * new_stride);
+    scene.sh.shrink_to_fit();
+    scene.sh_degree = degree;
 }
 
 Scene replicate_grid(const Scene& scene, int nx, int ny, int up_axis) {

@@ -33,6 +33,7 @@ constexpr double kPsnrCap = 100.0;
 struct Options {
     std::string scene = "builtin:city?gaussians=1000000&seed=1";
     std::string grid = "1x1";
+    int sh_degree = -1;  // -1: the scene's
     std::string up = "z";
     std::string trajectory = "builtin:survey?altitude=80&pitch=-45&speed=8&fps=30&frames=300";
     std::string backend = "cuda";
@@ -216,6 +217,7 @@ int run(const Options& o) {
     load.progress = catgs::stderr_progress(!o.quiet);
     auto scene = std::make_shared<catgs::Scene>(catgs::load_scene(o.scene, load));
     if (grid_x * grid_y > 1) *scene = catgs::replicate_grid(*scene, grid_x, grid_y, up_axis);
+    if (o.sh_degree >= 0) catgs::truncate_sh(*scene, o.sh_degree);
     const catgs::Intrinsics intrinsics = catgs::intrinsics_from_fov(o.width, o.height, o.fov);
     catgs::validate(intrinsics, "--width/--height/--fov");
     std::vector<catgs::Camera> cameras = catgs::load_trajectory(o.trajectory, scene->bounds, intrinsics);
@@ -322,6 +324,10 @@ int main(int argc, char** argv) {
     Options o;
     CLI::App app{"catgs-bench: per-stage timings of a renderer along a camera path, and time against error"};
     app.add_option("--scene", o.scene, "PLY or .splat file, or builtin:city?gaussians=N&seed=S")->capture_default_str();
+    app.add_option("--sh-degree", o.sh_degree,
+                   "render with the SH coefficients above this degree (0..3) dropped; 0: view-independent colour "
+                   "(default: the scene's degree)")
+        ->check(CLI::Range(0, 3));
     app.add_option("--grid", o.grid, "replicate the scene NxM over the horizontal axes (e.g. 3x3)")->capture_default_str();
     app.add_option("--up", o.up, "the scene's up axis (x, y, z, -y, ...) for --grid")->capture_default_str();
     app.add_option("--trajectory", o.trajectory, "trajectory file or builtin:survey|orbit|flythrough|hover?...")

@@ -13,6 +13,7 @@
 #include "catgs/error.hpp"
 #include "catgs/renderer.hpp"
 #include "catgs/scene_io.hpp"
+#include "catgs/scene_ops.hpp"
 #include "catgs/trajectory.hpp"
 #include "cli_options.hpp"
 #include "image_file.hpp"
@@ -33,6 +34,7 @@ struct Options {
     catgs::cli::PipelineFlags pipeline;
     std::string background = "0,0,0";
     int width = 960, height = 540;
+    int sh_degree = -1;  // -1: the scene's
     double fov = 70.0;
     double near_plane = catgs::kDefaultNearPlane;
     int threads = 0;
@@ -102,6 +104,7 @@ int run(const Options& o) {
     load.progress = catgs::stderr_progress(!o.quiet);
     catgs::LoadReport report;
     auto scene = std::make_shared<catgs::Scene>(catgs::load_scene(o.scene, load, &report));
+    if (o.sh_degree >= 0) catgs::truncate_sh(*scene, o.sh_degree);
     if (!o.quiet && (report.dropped_invalid || report.dropped_transparent))
         std::cerr << "dropped " << report.dropped_invalid << " invalid and " << report.dropped_transparent
                   << " transparent (opacity < 1/255) Gaussians of " << report.records << "\n";
@@ -215,6 +218,10 @@ int main(int argc, char** argv) {
     app.add_option("--near", o.near_plane, "near plane (view-space z)")->capture_default_str();
     app.add_option("--threads", o.threads, "CPU threads (0: all)")->capture_default_str();
     app.add_option("--max-frames", o.max_frames, "render at most this many cameras (-1: all)")->capture_default_str();
+    app.add_option("--sh-degree", o.sh_degree,
+                   "render with the SH coefficients above this degree (0..3) dropped; 0: view-independent colour "
+                   "(default: the scene's degree)")
+        ->check(CLI::Range(0, 3));
     app.add_flag("--drop-invalid", o.drop_invalid, "drop non-finite or zero-quaternion records instead of failing");
     app.add_flag("--info", o.info, "print the scene's count, SH degree, bounds and memory, then exit");
     app.add_flag("--json", o.json, "machine-readable output (--info, or the render summary with per-frame stats)");

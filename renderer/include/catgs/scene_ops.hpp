@@ -23,6 +23,12 @@ Scene replicate_grid(const Scene& scene, int nx, int ny, int up_axis);
 /// Gaussians with a non-finite position go last.
 void partition_into_chunks(Scene& scene);
 
+/// Drops the SH coefficients above `degree` (0..3): a scene rendered at degree 0 evaluates only
+/// the DC term, a view-independent colour. The image equals that of the scene with those
+/// coefficients set to zero. A degree at or above the scene's changes nothing; a negative one
+/// throws catgs::Error.
+void truncate_sh(Scene& scene, int degree);
+
 /// Parses "3x3" into (3, 3); throws catgs::Error naming the text otherwise.
 std::pair<int, int> parse_grid(const std::string& text);
 
