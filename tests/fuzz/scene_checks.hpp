@@ -50,4 +50,31 @@ inline void check_scene(const Scene& scene, const LoadReport& report, const Load
     for (float v : scene.sh) require(std::isfinite(v), "non-finite SH coefficient");
 }
 
+/// The body of a scene reader's target: writes the input to a file and reads it twice with
+/// `read` (read_ply, read_splat): with the defaults (invalid records are errors) and with
+/// drop_invalid and without recentring, so both paths of SceneBuilder are searched. A loaded
+/// scene must pass check_scene and `extra`; an error must be a one-line catgs::Error naming
+/// the file.
+template <typename Read, typename Extra>
+int fuzz_scene_reader(const std::uint8_t* data, std::size_t size, Read read, Extra extra) {
+    if (size > kMaxInputBytes) return -1;
+    static MemoryFile file;
+    const std::string& path = file.write(data, size);
+    for (bool drop_invalid : {false, true}) {
+        LoadOptions options;
+        options.drop_invalid = drop_invalid;
+        options.recentre = !drop_invalid;
+        options.max_records = kMaxRecords;
+        LoadReport report;
+        try {
+            const Scene scene = read(path, options, &report);
+            check_scene(scene, report, options);
+            extra(scene);
+        } catch (const Error& e) {
+            check_file_message(e.what(), path);
+        }
+    }
+    return 0;
+}
+
 }  // namespace catgs::fuzz
