@@ -375,6 +375,63 @@ TEST(CpuRendererCompare, OpacityAwareTilesCoverEveryContributingPixel) {
     EXPECT_GT(checked, 1000u);
 }
 
+// visible_box (the GPU rasterizer's per-warp skip): every pixel a Gaussian draws on, in float
+// and in double, has its centre inside the box; and the box does skip most of the pixels of
+// the tiles a Gaussian touches, or it would save nothing.
+template <typename T>
+void check_visible_box(const char* name) {
+    const RandomCase c = random_case(name, 300);
+    CpuRenderer<T> renderer(1);
+    RenderOptions options;
+    ImageF out;
+    renderer.render(c.scene, c.camera, options, out);
+    const View<T> view = make_view<T>(c.camera, c.scene.origin);
+    std::size_t drawn = 0, in_tiles = 0, skipped = 0;
+    for (std::size_t i = 0; i < c.scene.count(); ++i) {
+        if (renderer.tiles_touched()[i] == 0) continue;
+        const Projected<T>& g = renderer.projected()[i];
+        const PixelBox<T> box = visible_box(g);
+        std::vector<bool> touched(static_cast<std::size_t>(view.tiles_x * view.tiles_y), false);
+        for_each_touched_tile(g, Culling::opacity_aware, view, [&](std::uint32_t t) { touched[t] = true; });
+        for (int y = 0; y < view.height; ++y)
+            for (int x = 0; x < view.width; ++x) {
+                const T cx = static_cast<T>(x) + T(0.5), cy = static_cast<T>(y) + T(0.5);
+                const bool missed = box_misses_centres(box, cx, cy, cx, cy);
+                if (touched[(y / kTileSize) * view.tiles_x + x / kTileSize]) {
+                    ++in_tiles;
+                    skipped += missed;
+                }
+                // The rasterizer's own test, as the GPU runs it.
+                const T power = gaussian_power(g.mean, g.conic, cx, cy);
+                if (!(power >= min_visible_power(g.opacity))) continue;
+                PixelAccumulator<T> acc;
+                blend_power(acc, power, g.opacity, g.colour);
+                if (acc.transmittance < T(1)) {
+                    ++drawn;
+                    ASSERT_FALSE(missed) << name << ": gaussian " << i << " draws pixel " << x << "," << y
+                                         << " outside its visible box";
+                }
+            }
+    }
+    EXPECT_GT(drawn, 1000u);
+    EXPECT_GT(static_cast<double>(skipped), 0.3 * static_cast<double>(in_tiles)) << name;
+    std::printf("%s: %zu drawn pixels inside their boxes; the boxes skip %.1f%% of the pixels of touched tiles\n",
+                name, drawn, 100.0 * static_cast<double>(skipped) / static_cast<double>(in_tiles));
+}
+
+TEST(CpuRendererCompare, VisibleBoxHoldsEveryDrawnPixel) {
+    check_visible_box<float>("visible box, float");
+    check_visible_box<double>("visible box, double");
+    // A Gaussian whose extent is not finite is never skipped; one that cannot reach 1/255 always is.
+    Projected<float> g{};
+    g.opacity = 0.5f;
+    g.cov = {std::nanf(""), 0.f, 1.f};
+    EXPECT_FALSE(box_misses_centres(visible_box(g), 0.5f, 0.5f, 0.5f, 0.5f));
+    g.cov = {1.f, 0.f, 1.f};
+    g.opacity = 1.0f / 512;
+    EXPECT_TRUE(box_misses_centres(visible_box(g), 0.5f, 0.5f, 100.5f, 100.5f));
+}
+
 TEST(CpuRendererCompare, DeterministicAcrossRunsAndThreadCounts) {
     test::RandomSceneParams p;
     p.count = 3000;

@@ -73,6 +73,30 @@ CATGS_HD Vec2<T> footprint_extent(const Projected<T>& g, Culling mode) {
     return {sqrt_of(level * g.cov.x), sqrt_of(level * g.cov.z)};
 }
 
+/// The axis-aligned box [x0, x1] x [y0, y1] (pixels) of the opacity-aware ellipse, slack
+/// included: outside it alpha < 1/255, which blending draws as nothing. A rasterizer may
+/// therefore skip a Gaussian for a whole block of pixels whose centres miss the box, with the
+/// same guarantee as opacity-aware tile culling. Empty when alpha cannot reach 1/255.
+template <typename T>
+struct PixelBox {
+    T x0, y0, x1, y1;
+};
+
+template <typename T>
+CATGS_HD PixelBox<T> visible_box(const Projected<T>& g) {
+    const Vec2<T> e = footprint_extent(g, Culling::opacity_aware);
+    // Empty: a box beyond every pixel centre (3e38 is finite in float and double).
+    if (e.x < T(0)) return {T(3e38), T(3e38), T(-3e38), T(-3e38)};
+    return {g.mean.x - e.x, g.mean.y - e.y, g.mean.x + e.x, g.mean.y + e.y};
+}
+
+/// Do the pixel centres [cx0, cx1] x [cy0, cy1] all miss the box? NaN bounds miss nothing,
+/// so a Gaussian whose extent is not finite is never skipped.
+template <typename T>
+CATGS_HD bool box_misses_centres(const PixelBox<T>& b, T cx0, T cy0, T cx1, T cy1) {
+    return b.x0 > cx1 || b.x1 < cx0 || b.y0 > cy1 || b.y1 < cy0;
+}
+
 /// An upper bound (pixels) on a footprint's half-extent at any pose near the current one: the
 /// Gaussian's largest 3D scale projected at its depth, times the culling mode's sigma
 /// multiple, plus the blur. Unlike the current 2D extent it does not vanish for a needle
