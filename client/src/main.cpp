@@ -134,6 +134,7 @@ struct SessionFlags {
     std::string cache = "off";
     std::string window = "adaptive";
     std::string split = "off";
+    std::string resort = "on";
     int max_unacked = 2;
     int flight_plan = 0;
     bool no_velocity = false;
@@ -154,6 +155,10 @@ void add_session_flags(CLI::App* app, SessionFlags& f) {
     app->add_option("--cache", f.cache, "off or speculative (the inter-frame cache; off is also the server's default)")->capture_default_str();
     app->add_option("--window", f.window, "adaptive or a fixed W 1..16")->capture_default_str();
     app->add_option("--split", f.split, "off, auto or k")->capture_default_str();
+    app->add_option("--resort", f.resort,
+                    "with --cache speculative: on re-sorts cached frames by the current depth (exact order); off "
+                    "keeps the key frame's order (the paper's cache: faster, coplanar layers may swap)")
+        ->capture_default_str();
     app->add_option("--max-unacked", f.max_unacked, "frames the server may send ahead of our acknowledgement (1..2)")
         ->capture_default_str();
     app->add_option("--flight-plan", f.flight_plan, "future poses sent with each request (0..16)")->capture_default_str();
@@ -187,6 +192,8 @@ v1::SessionConfig make_config(const SessionFlags& f) {
             throw Error("--window '" + f.window + "': expected adaptive or 1..16");
         }
     }
+    if (f.resort == "off") p->set_reuse_depth_order(true);
+    else if (f.resort != "on") throw Error("--resort '" + f.resort + "': expected on or off");
     if (f.split == "auto") p->set_split(v1::SPLIT_MODE_AUTO);
     else if (f.split != "off") {
         try {

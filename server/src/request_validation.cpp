@@ -60,6 +60,7 @@ RenderOptions render_options_for(const v1::PipelineOptions& p, const v1::Color* 
         c.adaptive_window = true;
         if (p.window_start() > 0) c.window = static_cast<int>(p.window_start());
     }
+    c.resort_cached = !p.reuse_depth_order();
     switch (p.split()) {
     case v1::SPLIT_MODE_AUTO: c.split_auto = true; break;
     case v1::SPLIT_MODE_FIXED: c.split_k = p.split_k(); break;

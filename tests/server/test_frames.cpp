@@ -111,6 +111,14 @@ TEST_F(FramesTest, RawFramesAreExactWithFixedWindowAndSplit) {
     stream_and_compare(config, true, false);
 }
 
+TEST_F(FramesTest, RawFramesAreExactWithTheReusedDepthOrder) {
+    v1::SessionConfig config = session_config(v1::ENCODING_RAW_RGB8);
+    config.mutable_pipeline()->set_cache(v1::CACHE_MODE_SPECULATIVE);
+    config.mutable_pipeline()->set_reuse_depth_order(true);
+    config.mutable_pipeline()->set_fixed_window(4);
+    stream_and_compare(config, true, false);
+}
+
 TEST_F(FramesTest, JpegQuality90IsCloseToTheReference) {
     stream_and_compare(session_config(v1::ENCODING_JPEG, 90), false, true);
 }
@@ -164,13 +172,16 @@ TEST_F(FramesTest, PipelineOptionsMapOntoRenderOptions) {
     EXPECT_EQ(setup.options.catgs.cache, CacheMode::off);  // off by default (measured faster)
     EXPECT_TRUE(setup.options.catgs.adaptive_window);
     EXPECT_EQ(setup.options.culling, Culling::opacity_aware);
+    EXPECT_TRUE(setup.options.catgs.resort_cached);  // exact depth order by default
     config.mutable_pipeline()->set_cache(v1::CACHE_MODE_SPECULATIVE);
+    config.mutable_pipeline()->set_reuse_depth_order(true);
     config.mutable_pipeline()->set_fixed_window(8);
     config.mutable_pipeline()->set_split(v1::SPLIT_MODE_AUTO);
     config.mutable_pipeline()->set_culling(v1::CULLING_BBOX3SIGMA);
     config.mutable_pipeline()->set_near_plane(0.5);
     ASSERT_TRUE(server::parse_session_config(config, {}, "open", &setup).ok());
     EXPECT_EQ(setup.options.catgs.cache, CacheMode::speculative);
+    EXPECT_FALSE(setup.options.catgs.resort_cached);
     EXPECT_FALSE(setup.options.catgs.adaptive_window);
     EXPECT_EQ(setup.options.catgs.window, 8);
     EXPECT_TRUE(setup.options.catgs.split_auto);
