@@ -21,6 +21,7 @@
 #include "catgs/server/server.hpp"
 #include "catgs/trajectory.hpp"
 #include "catgs/v1/catgs.grpc.pb.h"
+#include "grpc/health/v1/health.grpc.pb.h"
 
 namespace catgs::test {
 
@@ -119,6 +120,23 @@ inline v1::StreamRequest frame_message(const v1::FrameRequest& frame) {
 }
 
 /// A synchronous stream: open it, then send/receive.
+using HealthStatus = grpc::health::v1::HealthCheckResponse;
+
+/// grpc.health.v1.Health/Check of `service` ("" = the whole server) over `channel`, with a
+/// 5 s deadline; UNKNOWN when the call fails, its status in *status.
+inline HealthStatus::ServingStatus health(const std::shared_ptr<grpc::Channel>& channel, const std::string& service,
+                                          grpc::Status* status = nullptr) {
+    auto stub = grpc::health::v1::Health::NewStub(channel);
+    grpc::ClientContext context;
+    context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(5));
+    grpc::health::v1::HealthCheckRequest request;
+    request.set_service(service);
+    HealthStatus response;
+    grpc::Status s = stub->Check(&context, request, &response);
+    if (status) *status = s;
+    return s.ok() ? response.status() : HealthStatus::UNKNOWN;
+}
+
 struct StreamClient {
     grpc::ClientContext context;
     std::unique_ptr<v1::RenderService::Stub> stub;

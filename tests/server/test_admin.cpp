@@ -9,25 +9,14 @@
 
 #include <filesystem>
 
-#include "grpc/health/v1/health.grpc.pb.h"
 #include "server_test_util.hpp"
 
 namespace catgs::test {
 namespace {
 
 namespace fs = std::filesystem;
-using HealthStatus = grpc::health::v1::HealthCheckResponse;
-
 HealthStatus::ServingStatus health(int port, const std::string& service, grpc::Status* status = nullptr) {
-    auto stub = grpc::health::v1::Health::NewStub(channel_to(port));
-    grpc::ClientContext context;
-    context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(5));
-    grpc::health::v1::HealthCheckRequest request;
-    request.set_service(service);
-    HealthStatus response;
-    grpc::Status s = stub->Check(&context, request, &response);
-    if (status) *status = s;
-    return s.ok() ? response.status() : HealthStatus::UNKNOWN;
+    return test::health(channel_to(port), service, status);
 }
 
 TEST(ServerAdmin, HealthServesEveryService) {

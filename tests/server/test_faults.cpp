@@ -13,7 +13,6 @@
 #include <random>
 
 #include "fake_device.hpp"
-#include "grpc/health/v1/health.grpc.pb.h"
 #include "process_util.hpp"
 #include "server_test_util.hpp"
 
@@ -21,16 +20,7 @@ namespace catgs::test {
 namespace {
 
 namespace fs = std::filesystem;
-using HealthStatus = grpc::health::v1::HealthCheckResponse;
-
-bool serving(int port) {
-    auto stub = grpc::health::v1::Health::NewStub(channel_to(port));
-    grpc::ClientContext context;
-    context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(5));
-    grpc::health::v1::HealthCheckRequest request;
-    HealthStatus response;
-    return stub->Check(&context, request, &response).ok() && response.status() == HealthStatus::SERVING;
-}
+bool serving(int port) { return health(channel_to(port), "") == HealthStatus::SERVING; }
 
 /// The server is healthy and holds nothing of the streams that went before.
 void expect_healthy_and_idle(server::Server& server, int expected_streams = 0) {

@@ -6,7 +6,6 @@
 #include <cstdlib>
 #include <filesystem>
 
-#include "grpc/health/v1/health.grpc.pb.h"
 #include "process_util.hpp"
 #include "server_test_util.hpp"
 
@@ -14,7 +13,6 @@ namespace catgs::test {
 namespace {
 
 namespace fs = std::filesystem;
-using HealthStatus = grpc::health::v1::HealthCheckResponse;
 
 std::string read_text(const fs::path& path) {
     std::ifstream in(path, std::ios::binary);
@@ -120,19 +118,6 @@ TEST_F(TlsTest, MutualTlsRequiresAClientCertificateFromTheCa) {
     const grpc::Status status = one_frame(tls_channel(server->port(), "ca.crt", "client"), &got);
     EXPECT_TRUE(status.ok()) << status.error_message();
     EXPECT_TRUE(got);
-}
-
-HealthStatus::ServingStatus health(const std::shared_ptr<grpc::Channel>& channel, const std::string& service,
-                                   grpc::Status* status = nullptr) {
-    auto stub = grpc::health::v1::Health::NewStub(channel);
-    grpc::ClientContext context;
-    context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(5));
-    grpc::health::v1::HealthCheckRequest request;
-    request.set_service(service);
-    HealthStatus response;
-    grpc::Status s = stub->Check(&context, request, &response);
-    if (status) *status = s;
-    return s.ok() ? response.status() : HealthStatus::UNKNOWN;
 }
 
 /// Every method of both services answers UNAUTHENTICATED without the token, with a message
