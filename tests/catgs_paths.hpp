@@ -35,16 +35,20 @@ struct CacheRun {
     RenderOptions options;
 };
 
-/// The speculative cache with k = 64, so that cached frames carry split tasks too (auto k is
-/// too large for lists this short: the combination a sweep once found broken); with the
-/// adaptive window, and with W fixed at 4 so that fast paths also run on speculated poses.
+/// The configurations the bar holds for, each with k = 64 so that cached frames carry split
+/// tasks too (the default k and auto k are too large for lists this short: the combination a
+/// sweep once found broken): the defaults (default_pipeline_options: adaptive window, the key
+/// frame's depth order reused), that cache with W fixed at 4 so that fast paths also run on
+/// speculated poses, and W = 4 with cached frames re-sorted (exact order).
 inline std::vector<CacheRun> accuracy_bar_runs() {
-    RenderOptions adaptive;
-    adaptive.catgs.cache = CacheMode::speculative;
-    adaptive.catgs.split_k = 64;
-    RenderOptions fixed = adaptive;
+    RenderOptions defaults = default_pipeline_options();
+    defaults.catgs.split_k = 64;
+    RenderOptions fixed = defaults;
     fixed.catgs.adaptive_window = false;
-    return {{" adaptive", adaptive}, {" W=4", fixed}};
+    fixed.catgs.window = 4;
+    RenderOptions resorted = fixed;
+    resorted.catgs.resort_cached = true;
+    return {{" defaults", defaults}, {" W=4", fixed}, {" W=4 re-sorted", resorted}};
 }
 
 /// Calls `run(path, cache_run)` for every path under every run of the accuracy bar.

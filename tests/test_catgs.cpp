@@ -3,6 +3,8 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <limits>
+#include <map>
 
 #include "catgs/builtin_city.hpp"
 #include "catgs/cache.hpp"
@@ -319,6 +321,128 @@ TEST(CatgsCache, DepthOrderReuseErrorIsMeasuredAndResortRemovesIt) {
     EXPECT_GT(b.cached_frames, 12);
     EXPECT_GE(b.worst_psnr, 60.0);
     EXPECT_LT(a.worst_psnr, b.worst_psnr);
+}
+
+/// How far (in ulps of the full pipeline's float sort keys) the cached renderer's tile lists
+/// step back in depth, over the Gaussians the full pipeline lists in each tile: at most 1 when
+/// they order every tile as the full pipeline does, except pairs whose keys lie within one ulp
+/// (there rounding, not geometry, sets the full pipeline's own order).
+std::uint32_t order_violation_ulps(const CpuRenderer<float>& cached, const CpuRenderer<float>& full) {
+    std::uint32_t worst = 0;
+    const auto& cr = cached.tile_ranges();
+    const auto& fr = full.tile_ranges();
+    for (std::size_t t = 0; t < fr.size(); ++t) {
+        std::map<std::uint32_t, std::uint32_t> depth_bits;  // Gaussian -> its key's depth bits
+        for (std::uint64_t j = fr[t].begin; j < fr[t].end; ++j)
+            depth_bits[full.sorted_values()[j]] = static_cast<std::uint32_t>(full.sorted_keys()[j]);
+        std::uint32_t deepest = 0;
+        for (std::uint64_t j = cr[t].begin; j < cr[t].end; ++j) {
+            const auto it = depth_bits.find(cached.sorted_values()[j]);
+            if (it == depth_bits.end()) continue;
+            if (it->second < deepest) worst = std::max(worst, deepest - it->second);
+            deepest = std::max(deepest, it->second);
+        }
+    }
+    return worst;
+}
+
+// The defaults reuse the key frame's depth order only while the camera translates: view depth
+// is dot(forward, mean - centre), so a translation shifts every key by the same amount and
+// keeps the order, except among keys within one float ulp. Once the camera turns, the window
+// re-sorts, and keeps re-sorting even if it turns back (its lists no longer hold the key
+// frame's order). Reusing the order through a turn (the paper's cache) breaks it.
+TEST(CatgsCache, OrderIsReusedWhileTheCameraTranslatesAndResortedOnceItTurns) {
+    const Scene city = small_city("order gate");
+    const Intrinsics k = path_intrinsics();
+    const Bounds& b = city.bounds;
+    const double cx = 0.5 * (b.min[0] + b.max[0]), cy = 0.5 * (b.min[1] + b.max[1]);
+    // The rotation of `r` with its camera centre moved to `centre` (t = -R c).
+    auto placed = [](Pose r, const std::array<double, 3>& centre) {
+        for (int i = 0; i < 3; ++i)
+            r.translation[i] = -(r.rotation[3 * i] * centre[0] + r.rotation[3 * i + 1] * centre[1] +
+                                 r.rotation[3 * i + 2] * centre[2]);
+        return r;
+    };
+    // A straight pass at 10 m/s, constant heading and pitch: every frame has the key's rotation.
+    std::vector<Camera> cameras;
+    const Pose heading = look_at({0, 0, 0}, {0, 1, -1}, {0, 0, 1});
+    for (int i = 0; i < 12; ++i) {
+        Camera c;
+        c.intrinsics = k;
+        c.pose = placed(heading, {cx, cy - 40 + i / 3.0, 60});
+        c.timestamp = i / 30.0;
+        cameras.push_back(c);
+    }
+    RenderOptions o = default_pipeline_options();
+    o.catgs.adaptive_window = false;
+    o.catgs.window = 4;
+    o.catgs.split_k = 64;
+    CpuRenderer<float> renderer, full;
+    int reused = 0;
+    for (const Camera& c : cameras) {
+        ImageF a, ref;
+        const FrameStats s = renderer.render(city, c, o, a);
+        full.render(city, c, RenderOptions{}, ref);
+        reused += s.order_reused;
+        EXPECT_EQ(s.order_reused, !s.key_frame);
+        EXPECT_LE(order_violation_ulps(renderer, full), 1u) << "frame at t = " << c.timestamp;
+        EXPECT_GE(compare(to_rgb8(a), to_rgb8(ref)).psnr, test::kWorstPsnrBar);
+    }
+    EXPECT_GE(reused, 8);
+
+    // A turn of 0.5 deg a frame with the order reused at any angle: layers now swap by more
+    // than rounding.
+    RenderOptions paper = o;
+    paper.catgs.reuse_order_max_angle = std::numeric_limits<double>::infinity();
+    CpuRenderer<float> turning;
+    std::uint32_t turned_worst = 0;
+    int turned_reused = 0;
+    for (int i = 0; i < 4; ++i) {
+        Camera c = cameras[0];
+        const double yaw = 0.5 * i * kPi / 180.0;
+        c.pose = placed(look_at({0, 0, 0}, {std::sin(yaw), std::cos(yaw), -1}, {0, 0, 1}), {cx, cy - 40, 60});
+        c.timestamp = i / 30.0;
+        ImageF a, ref;
+        turned_reused += turning.render(city, c, paper, a).order_reused;
+        full.render(city, c, RenderOptions{}, ref);
+        turned_worst = std::max(turned_worst, order_violation_ulps(turning, full));
+    }
+    EXPECT_GE(turned_reused, 2);  // frame 1 starts the window: the first one predicted no turn
+    EXPECT_GT(turned_worst, 1000u);
+
+    // The planner: translated frames reuse, a turn of 0.01 deg re-sorts, and so does the
+    // next frame back at the key's rotation.
+    FramePlanner planner;
+    CatgsOptions gate = o.catgs;
+    gate.window = 8;
+    gate.guard_px = 64;
+    auto at = [&](double dx, double yaw_deg, double t) {
+        Camera c = cameras[0];
+        const double yaw = yaw_deg * kPi / 180.0;
+        c.pose = placed(look_at({0, 0, 0}, {std::sin(yaw), std::cos(yaw), -1}, {0, 0, 1}), {cx + dx, cy - 40, 60});
+        c.timestamp = t;
+        return c;
+    };
+    const FramePlanner::Plan key = planner.next(at(0, 0, 0), gate);
+    ASSERT_TRUE(key.key);
+    KeyFrameSummary summary;
+    summary.min_depth = 50;
+    summary.mean_inverse_depth = 1.0 / 80;
+    planner.key_rendered(key, summary);
+    const auto translated = planner.next(at(0.01, 0, 1 / 30.0), gate);
+    ASSERT_FALSE(translated.key);
+    EXPECT_FALSE(translated.resort);
+    const auto turned = planner.next(at(0.02, 0.01, 2 / 30.0), gate);
+    ASSERT_FALSE(turned.key);
+    EXPECT_TRUE(turned.resort);
+    const auto back = planner.next(at(0.03, 0, 3 / 30.0), gate);
+    ASSERT_FALSE(back.key);
+    EXPECT_TRUE(back.resort);
+    // With re-sorting requested, every cached frame re-sorts.
+    gate.resort_cached = true;
+    planner.reset();
+    planner.key_rendered(planner.next(at(0, 0, 0), gate), summary);
+    EXPECT_TRUE(planner.next(at(0.01, 0, 1 / 30.0), gate).resort);
 }
 
 TEST(CatgsCache, HoverUsesLongWindowsAndLeavingTheEnvelopeStartsAKeyFrame) {

@@ -590,6 +590,7 @@ struct CudaRenderer<T>::Impl {
     bool cache_valid = false;           // the lists on the device belong to the current window
     std::uint64_t cached_pairs = 0;     // pairs of the cached lists
     bool cached_split = false;          // the cached task list has split tiles
+    bool cached_emitted = false;        // emitted_keys/values hold the key frame's pairs (re-sort)
     ChunkSpace key_space{};             // the key frame's compacted index space (cached frames reuse it)
     std::uint64_t key_chunks_culled = 0;
 
@@ -748,10 +749,15 @@ FrameStats CudaRenderer<T>::render(const Camera& camera, const RenderOptions& op
     cudaEvent_t* e = m.events;
 
     FramePlanner::Plan plan = m.planner.next(camera, catgs, hints);
-    if (!plan.key && !m.cache_valid) plan = FramePlanner::Plan{true, {camera}, plan.window};
+    // A cached frame that re-sorts needs the pairs in emission order, which a key frame that
+    // reused the depth order did not keep.
+    if (!plan.key && (!m.cache_valid || (plan.resort && !m.cached_emitted)))
+        plan = FramePlanner::Plan{true, {camera}, plan.window};
+    const CacheMode frame_cache = plan.cache(catgs);
     FrameStats stats;
     stats.key_frame = plan.key;
     stats.window = plan.window;
+    stats.order_reused = !plan.key && !plan.resort;
 
     // Arenas for this frame's per-Gaussian, per-slot (chunk-compacted), per-tile and per-pixel
     // buffers.
@@ -788,7 +794,7 @@ FrameStats CudaRenderer<T>::render(const Camera& camera, const RenderOptions& op
     // A speculative window lowers the near plane by the translation guard, so that a pose
     // inside the envelope finds Gaussians that cross the near plane; the actual pose is then
     // projected again with the real near plane.
-    const bool speculative = catgs.cache == CacheMode::speculative;
+    const bool speculative = frame_cache == CacheMode::speculative;
     const double near = speculative ? std::max(kMinSpeculativeNear, options.near_plane - catgs.guard_translation)
                                     : options.near_plane;
     const bool reproject_actual = near != options.near_plane;
@@ -867,7 +873,7 @@ FrameStats CudaRenderer<T>::render(const Camera& camera, const RenderOptions& op
         CATGS_CUDA_CHECK(cudaMemsetAsync(m.touched.data() + slots, 0, sizeof(std::uint64_t), s));
         if (slots > 0) {
             const unsigned blocks = blocks_for(slots, kThreads);
-            if (w == 1 && catgs.cache == CacheMode::off)
+            if (w == 1 && frame_cache == CacheMode::off)
                 preprocess_kernel<T, 1, false><<<blocks, kThreads, 0, s>>>(
                     sv, m.key_space, m.views.data(), 1, view, reproject_actual, options.culling, guard,
                     guard_translation, m.projected.data(), m.touched.data(), m.sort_depth.data(), frame_counters);
@@ -915,7 +921,7 @@ FrameStats CudaRenderer<T>::render(const Camera& camera, const RenderOptions& op
         }
         CATGS_CUDA_CHECK(cudaEventRecord(e[kPreprocess], s));
         total = m.cached_pairs;
-        if (catgs.resort_cached && total > 0) {
+        if (plan.resort && total > 0) {
             m.current = 0;
             rekey_kernel<T><<<blocks_for(total, kThreads), kThreads, 0, s>>>(
                 total, m.emitted_keys.data(), m.emitted_values.data(), m.projected.data(), view, options.culling,
@@ -923,9 +929,9 @@ FrameStats CudaRenderer<T>::render(const Camera& camera, const RenderOptions& op
             CATGS_CUDA_CHECK_LAUNCH("rekey");
         }
         CATGS_CUDA_CHECK(cudaEventRecord(e[kEmit], s));
-        if (catgs.resort_cached) m.sort(total, tile_bits);
+        if (plan.resort) m.sort(total, tile_bits);
         CATGS_CUDA_CHECK(cudaEventRecord(e[kSort], s));
-        if (catgs.resort_cached) {
+        if (plan.resort) {
             m.cached_split = ranges_and_tasks(total);
         } else {
             CATGS_CUDA_CHECK(cudaEventRecord(e[kRanges], s));
@@ -974,7 +980,7 @@ FrameStats CudaRenderer<T>::render(const Camera& camera, const RenderOptions& op
                 }
                 const bool band = bands.size() > 1;
                 const int w = static_cast<int>(plan.poses.size());
-                const T guard = catgs.cache == CacheMode::speculative ? static_cast<T>(catgs.guard_px) : T(0);
+                const T guard = speculative ? static_cast<T>(catgs.guard_px) : T(0);
                 const unsigned emit_blocks = blocks_for(m.key_space.slots, kThreads);
                 if (w == 1)
                     emit_kernel<T, 1><<<emit_blocks, kThreads, 0, s>>>(
@@ -988,8 +994,11 @@ FrameStats CudaRenderer<T>::render(const Camera& camera, const RenderOptions& op
                         m.keys[0].data(), m.values[0].data());
                 CATGS_CUDA_CHECK_LAUNCH("emit");
             }
-            if (catgs.cache != CacheMode::off && bands.size() == 1 && pass_total > 0) {
-                // Cached frames re-key from the pairs in emission order (rekey_kernel).
+            // Cached frames that re-sort re-key from the pairs in emission order (rekey_kernel).
+            // With the depth order reused they never read them, and the copy (12 bytes a pair,
+            // 6M pairs on the city) would only lengthen key frames.
+            m.cached_emitted = frame_cache != CacheMode::off && catgs.cached_frames_may_resort() && bands.size() == 1;
+            if (m.cached_emitted && pass_total > 0) {
                 m.emitted_keys.reserve(pass_total, s);
                 m.emitted_values.reserve(pass_total, s);
                 CATGS_CUDA_CHECK(cudaMemcpyAsync(m.emitted_keys.data(), m.keys[0].data(), pass_total * sizeof(std::uint64_t),
@@ -1094,7 +1103,7 @@ FrameStats CudaRenderer<T>::render(const Camera& camera, const RenderOptions& op
     if (plan.key) {
         m.cached_pairs = total;
         m.cached_split = split_used;
-        m.cache_valid = catgs.cache != CacheMode::off && bands.size() == 1;
+        m.cache_valid = frame_cache != CacheMode::off && bands.size() == 1;
         if (m.cache_valid) {
             KeyFrameSummary summary;
             float nearest = 0, extent = 0;
@@ -1113,7 +1122,7 @@ FrameStats CudaRenderer<T>::render(const Camera& camera, const RenderOptions& op
     CATGS_CUDA_CHECK(cudaEventElapsedTime(&copy_ms, e[kCopyStart], e[kCopy]));
     // Render length: the pairs inside the grid that the tiles' lists hold (ranges counted them;
     // cached frames that re-sort park the rest), else every pair of the list.
-    const bool ranged = !shared_list && total > 0 && bands.size() == 1 && (plan.key || catgs.resort_cached);
+    const bool ranged = !shared_list && total > 0 && bands.size() == 1 && (plan.key || plan.resort);
     stats.pairs = ranged ? tc.rendered_pairs : total;
     stats.bands = static_cast<int>(bands.size());
     stats.chunks = scene.partitioned() ? chunk_count : 0;

@@ -94,7 +94,6 @@ constexpr std::uint64_t kGaussianStream = 0x676175737331ull;
 
 std::uint64_t stream_key(std::uint64_t seed, std::uint64_t stream) { return mix64(mix64(seed) ^ stream); }
 
-constexpr double kPi = 3.14159265358979323846;
 
 // sin and cos of 2*pi*turns. Reduced to [-pi/4, pi/4], where the Taylor series to x^13
 // (sin) and x^14 (cos) is accurate to 1e-14, far below float resolution.

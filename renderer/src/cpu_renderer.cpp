@@ -61,10 +61,15 @@ FrameStats CpuRenderer<T>::render(const Scene& scene, const Camera& camera, cons
     validate(camera.intrinsics, "camera '" + camera.name + "'");
     scene.check_consistent("cpu renderer: scene");
     const View<T> view = make_view<T>(camera, scene.origin, options.near_plane);
-    const FramePlanner::Plan plan = planner_.next(camera, options.catgs, hints);
+    FramePlanner::Plan plan = planner_.next(camera, options.catgs, hints);
+    // A cached frame that re-sorts needs the pairs in emission order, which a key frame that
+    // reused the depth order did not keep.
+    if (!plan.key && plan.resort && !emitted_kept_) plan = FramePlanner::Plan{true, {camera}, plan.window};
+    const CacheMode frame_cache = plan.cache(options.catgs);
     FrameStats stats;
     stats.key_frame = plan.key;
     stats.window = plan.window;
+    stats.order_reused = !plan.key && !plan.resort;
     const auto start = Clock::now();
     auto t = Clock::now();
     if (plan.key) {
@@ -72,7 +77,7 @@ FrameStats CpuRenderer<T>::render(const Scene& scene, const Camera& camera, cons
         // guard and footprints dilated by the pixel guard, so a pose inside the envelope
         // finds every Gaussian it needs in the cached lists.
         Window window;
-        const bool speculative = options.catgs.cache == CacheMode::speculative;
+        const bool speculative = frame_cache == CacheMode::speculative;
         window.guard = speculative ? static_cast<T>(options.catgs.guard_px) : T(0);
         window.guard_translation = speculative ? static_cast<T>(options.catgs.guard_translation) : T(0);
         const double near = speculative ? std::max(kMinSpeculativeNear, options.near_plane - options.catgs.guard_translation)
@@ -83,19 +88,27 @@ FrameStats CpuRenderer<T>::render(const Scene& scene, const Camera& camera, cons
         stats.preprocess_ms = elapsed_ms(t);
         t = Clock::now();
         emit_keys(scene, window, options.culling);
-        if (options.catgs.cache != CacheMode::off) {
-            // Cached frames re-key from the pairs in emission (Gaussian) order, so that their
-            // stable sort orders equal depths by index, exactly as a full render does.
+        // Cached frames that re-sort re-key from the pairs in emission (Gaussian) order, so
+        // that their stable sort orders equal depths by index, exactly as a full render does.
+        // With the depth order reused they never read them.
+        emitted_kept_ = frame_cache != CacheMode::off && options.catgs.cached_frames_may_resort();
+        if (emitted_kept_) {
             emitted_keys_ = keys_;
             emitted_values_ = values_;
+        } else {
+            emitted_keys_.clear();
+            emitted_values_.clear();
         }
         stats.keys_ms = elapsed_ms(t);
         sort_and_schedule(view, options, stats);
-        if (options.catgs.cache != CacheMode::off) planner_.key_rendered(plan, summarize(scene, window, options.culling));
+        if (frame_cache != CacheMode::off)
+            planner_.key_rendered(plan, summarize(scene, window, options.culling));
+        else
+            planner_.invalidate();
     } else {
         reproject(scene, view);
         stats.preprocess_ms = elapsed_ms(t);
-        if (options.catgs.resort_cached) {
+        if (plan.resort) {
             t = Clock::now();
             rekey_pairs(view, options.culling);
             stats.keys_ms = elapsed_ms(t);

@@ -15,6 +15,7 @@
 #include <nlohmann/json.hpp>
 
 #include "catgs/builtin_spec.hpp"
+#include "catgs/constants.hpp"
 #include "catgs/error.hpp"
 
 namespace catgs {
@@ -31,7 +32,6 @@ V3 cross(const V3& a, const V3& b) {
     return {a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]};
 }
 
-constexpr double kPi = 3.14159265358979323846;
 double radians(double degrees) { return degrees * kPi / 180.0; }
 
 // cameras.json stores rotations with 7-9 significant digits, so 1e-3 only rejects matrices

@@ -12,8 +12,10 @@
 #pragma once
 
 #include <array>
+#include <cmath>
 #include <cstdint>
 #include <deque>
+#include <limits>
 #include <optional>
 #include <string>
 #include <vector>
@@ -42,11 +44,21 @@ struct CatgsOptions {
 
     CacheMode cache = CacheMode::off;
     /// Cached frames re-sort their lists by the current depth (tiles unchanged, so only the
-    /// depth bits of the keys change). Without it the key frame's depth order is reused for
-    /// the whole window, as in the paper; measured on the built-in city, a slow orbit then
-    /// differs from the full render by up to ~120 levels in places where coplanar layers
-    /// (windows on facades, markings on roads) swap order, so it is on by default.
+    /// depth bits of the keys change), so that every frame is the full render's. Without it the
+    /// key frame's depth order is reused for the whole window, as in the paper: faster, but
+    /// where nearly coplanar layers (windows on facades, markings on roads) swap order within
+    /// a window single pixels differ (up to 33 levels over the 6M city survey). On here, off in
+    /// default_pipeline_options().
     bool resort_cached = true;
+    /// Without resort_cached, a cached frame reuses the key frame's depth order only while its
+    /// rotation is within this angle (radians) of the key frame's, and re-sorts otherwise (and
+    /// for the rest of the window). Sort keys are view depths, dot(forward, mean - centre): a
+    /// translation shifts every depth by the same amount and keeps their order, so only rotation
+    /// can swap layers. Infinity: always reuse (the paper's cache).
+    double reuse_order_max_angle = std::numeric_limits<double>::infinity();
+
+    /// Whether a cached frame may re-sort, so a key frame must keep its pairs in emission order.
+    bool cached_frames_may_resort() const { return resort_cached || std::isfinite(reuse_order_max_angle); }
     int window = 4;              ///< initial (adaptive) or fixed W, 1..16
     bool adaptive_window = true;
     double guard_px = 2.0;       ///< footprint dilation and envelope radius, pixels
@@ -112,6 +124,15 @@ public:
         bool key = true;
         std::vector<Camera> poses;  ///< key frame: the actual pose first, then the speculated ones
         int window = 1;
+        /// Cached frame: re-sort the cached pairs by the current depth (else reuse the key
+        /// frame's order, CatgsOptions::resort_cached and reuse_order_max_angle).
+        bool resort = true;
+        /// Key frame rendered as with the cache off (no speculation, guard band or kept lists):
+        /// the cache is off, or a window would not pay for its key frame (FramePlanner::next).
+        bool plain = false;
+
+        /// The cache mode this frame renders with.
+        CacheMode cache(const CatgsOptions& options) const { return plain ? CacheMode::off : options.cache; }
     };
 
     Plan next(const Camera& actual, const CatgsOptions& options, const FrameHints* hints = nullptr);
@@ -123,12 +144,18 @@ public:
     int window() const;
 
 private:
+    /// Radians the camera turns per frame: the reported angular speed, else the last step.
+    double expected_turn_per_frame(const FrameHints* hints) const;
+
     std::deque<Camera> history_;  // recent actual cameras, newest last
     std::optional<WindowController> controller_;
     std::vector<Camera> envelope_;  // speculated poses of the current cache
     KeyFrameSummary summary_;
     int frames_in_window_ = 0;
     int window_ = 1;
+    // A cached frame of this window re-sorted: the lists no longer hold the key frame's order
+    // (re-sorting drops pairs whose footprint left their tile), so the later ones re-sort too.
+    bool window_resorted_ = false;
 };
 
 /// Extrapolates `count` poses after the newest camera of `history` at constant linear and

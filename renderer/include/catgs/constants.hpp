@@ -8,6 +8,8 @@
 
 namespace catgs {
 
+inline constexpr double kPi = 3.14159265358979323846;
+
 /// Tiles are 16x16 pixels: one CUDA block of 256 threads rasterizes one tile, the layout
 /// of graphdeco 3DGS and gsplat; the sort key stores tile ids, so it also sets key bits.
 inline constexpr int kTileSize = 16;

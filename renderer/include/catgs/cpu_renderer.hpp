@@ -82,9 +82,9 @@ private:
     FramePlanner planner_;
     std::uint32_t split_k_ = 0;                   // k of the current task list
     std::uint64_t chunks_culled_ = 0;             // preprocess: chunks the key frame skipped
-    double window_min_depth_ = 0;
+    double window_min_depth_ = 0;                 // preprocess: nearest depth at any pose of the window
     double uncached_bound_px_ = 0;                // preprocess: footprint bound of uncached Gaussians near the image
-    std::uint64_t rendered_pairs_ = 0;            // ranges: pairs the tiles' lists hold                 // preprocess: nearest depth at any pose of the window
+    std::uint64_t rendered_pairs_ = 0;            // ranges: pairs the tiles' lists hold
     std::vector<Projected<T>> projected_;         // preprocess: at the actual pose; opacity 0 = culled
     std::vector<std::uint32_t> tiles_touched_;    // preprocess: union tile count, 0 = not cached
     std::vector<float> sort_depth_;               // preprocess: depth the keys sort by
@@ -93,6 +93,7 @@ private:
     std::vector<std::uint32_t> values_;           // Gaussian index per key
     std::vector<std::uint64_t> emitted_keys_;     // keys: a key frame's pairs in emission order (cache)
     std::vector<std::uint32_t> emitted_values_;
+    bool emitted_kept_ = false;                   // emitted_keys_/values_ hold the window's pairs
     std::vector<std::uint64_t> sort_keys_tmp_;    // sort: ping-pong buffers
     std::vector<std::uint32_t> sort_values_tmp_;
     std::vector<TileRange> ranges_;               // tile ranges

@@ -11,6 +11,9 @@
 
 namespace catgs {
 
+/// A value-initialised RenderOptions is the plain per-frame pipeline (opacity-aware culling with
+/// chunks, no split, no cache): the pipeline tests compare against. The tools and the server
+/// start from default_pipeline_options() instead.
 struct RenderOptions {
     Culling culling = Culling::opacity_aware;
     std::array<float, 3> background{0.0f, 0.0f, 0.0f};
@@ -21,6 +24,40 @@ struct RenderOptions {
     /// CaT-GS: tile task splitting, the speculative inter-frame cache and its window.
     CatgsOptions catgs;
 };
+
+/// Tile lists longer than this are split by default: the k that the H200 sweep of the issue
+/// scenes found fastest with the cache below: on the 6M city at 1080p it costs 0.01 ms against
+/// no split (1.05 ms), where k = 2048 or 4096 cost 0.1 ms; on the garden 3x3 it takes 2.16 ms
+/// against 2.55 unsplit (2048: 2.12).
+inline constexpr std::uint32_t kDefaultSplitK = 8192;
+/// The default guard band: 1 px cuts the cached pairs by 12% against 2 px (city 5.2M against
+/// 5.9M) at the same number of key frames, since W, not the envelope, ends the windows there.
+inline constexpr double kDefaultGuardPx = 1.0;
+
+/// By default a cached frame reuses the key frame's depth order only when its orientation is
+/// the key frame's up to rounding: a translation keeps every depth order, so such frames are
+/// the per-frame pipeline's, while any turn swaps exactly coplanar layers of the city. Measured
+/// on the 60k test city at 320x180 (W = 4): 0.05 deg let a hover's yaw drift swap layers by up
+/// to 25 levels (worst PSNR 58.8 dB against 65.0 re-sorted), and reusing at any angle (the
+/// paper's cache) fell below the accuracy bar on an orbit (worst frame 37.7 dB, 120 levels).
+inline constexpr double kDefaultReuseOrderMaxAngle = 1e-6;  // radians
+
+/// The pipeline catgs-render, catgs-bench and the server run unless told otherwise: the fastest
+/// configuration on the H200 that meets the accuracy bar (PSNR >= 45 dB mean and >= 40 dB on
+/// the worst frame against the per-frame pipeline, no tile missing a Gaussian; docs/results/)
+/// on every test path: the CaT-GS speculative cache with the adaptive window; its frames reuse
+/// the key frame's depth order while the camera only translates and re-sort once it turns
+/// (kDefaultReuseOrderMaxAngle); split k = kDefaultSplitK; guard kDefaultGuardPx.
+inline RenderOptions default_pipeline_options() {
+    RenderOptions o;
+    o.catgs.cache = CacheMode::speculative;
+    o.catgs.adaptive_window = true;
+    o.catgs.resort_cached = false;
+    o.catgs.reuse_order_max_angle = kDefaultReuseOrderMaxAngle;
+    o.catgs.split_k = kDefaultSplitK;
+    o.catgs.guard_px = kDefaultGuardPx;
+    return o;
+}
 
 /// Parses "exact", "bbox3sigma", "opacity-aware"; throws catgs::Error listing them otherwise.
 Culling parse_culling(const std::string& name);
@@ -36,6 +73,7 @@ struct FrameStats {
     int bands = 1;              ///< horizontal bands the frame was rendered in (GPU overflow path)
     bool key_frame = true;      ///< false: drawn from the inter-frame cache
     int window = 1;             ///< W of the window this frame belongs to
+    bool order_reused = false;  ///< cached frame drawn in the key frame's depth order (not re-sorted)
     std::uint64_t tasks = 0;    ///< rasterizer tasks: tiles plus extra split sub-tasks
     std::uint64_t split_tasks = 0;  ///< extra sub-tasks from splitting
     std::uint32_t split_k = 0;  ///< the k used this frame (0: no splitting)
