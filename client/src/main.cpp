@@ -131,10 +131,12 @@ struct SessionFlags {
     double fov = 70;
     std::string encoding = "jpeg";
     int quality = 85;
-    std::string cache = "off";
+    // "server": leave the field unset, so the server's default applies (README, defaults).
+    std::string cache = "server";
     std::string window = "adaptive";
-    std::string split = "off";
-    std::string resort = "on";
+    std::string split = "server";
+    std::string resort = "server";
+    std::string reuse_order_max_deg = "server";
     int max_unacked = 2;
     int flight_plan = 0;
     bool no_velocity = false;
@@ -152,12 +154,18 @@ void add_session_flags(CLI::App* app, SessionFlags& f) {
     app->add_option("--fov", f.fov, "horizontal field of view, degrees")->capture_default_str();
     app->add_option("--encoding", f.encoding, "jpeg, png or raw")->capture_default_str();
     app->add_option("--quality", f.quality, "JPEG quality 1..100")->capture_default_str();
-    app->add_option("--cache", f.cache, "off or speculative (the inter-frame cache; off is also the server's default)")->capture_default_str();
+    app->add_option("--cache", f.cache, "server, off or speculative (the inter-frame cache; the server's default is speculative)")
+        ->capture_default_str();
     app->add_option("--window", f.window, "adaptive or a fixed W 1..16")->capture_default_str();
-    app->add_option("--split", f.split, "off, auto or k")->capture_default_str();
+    app->add_option("--split", f.split, "server, off, auto or k (the server's default is k = 8192)")->capture_default_str();
     app->add_option("--resort", f.resort,
-                    "with --cache speculative: on re-sorts cached frames by the current depth (exact order); off "
-                    "keeps the key frame's order (the paper's cache: faster, coplanar layers may swap)")
+                    "server, on or off; with the cache: on re-sorts cached frames by the current depth (every frame "
+                    "exact); off keeps the key frame's order (the paper's cache and the server's default: faster, "
+                    "nearly coplanar layers may swap)")
+        ->capture_default_str();
+    app->add_option("--reuse-order-max-deg", f.reuse_order_max_deg,
+                    "server or degrees 0..180: with --resort off, cached frames keep the key frame's order while "
+                    "they have turned at most this much from it (180: always, the paper's cache)")
         ->capture_default_str();
     app->add_option("--max-unacked", f.max_unacked, "frames the server may send ahead of our acknowledgement (1..2)")
         ->capture_default_str();
@@ -184,7 +192,7 @@ v1::SessionConfig make_config(const SessionFlags& f) {
     auto* p = c.mutable_pipeline();
     if (f.cache == "off") p->set_cache(v1::CACHE_MODE_OFF);
     else if (f.cache == "speculative") p->set_cache(v1::CACHE_MODE_SPECULATIVE);
-    else throw Error("--cache '" + f.cache + "': expected speculative or off");
+    else if (f.cache != "server") throw Error("--cache '" + f.cache + "': expected server, speculative or off");
     if (f.window != "adaptive") {
         try {
             p->set_fixed_window(static_cast<std::uint32_t>(std::stoul(f.window)));
@@ -193,14 +201,31 @@ v1::SessionConfig make_config(const SessionFlags& f) {
         }
     }
     if (f.resort == "off") p->set_reuse_depth_order(true);
-    else if (f.resort != "on") throw Error("--resort '" + f.resort + "': expected on or off");
-    if (f.split == "auto") p->set_split(v1::SPLIT_MODE_AUTO);
-    else if (f.split != "off") {
+    else if (f.resort == "on") p->set_reuse_depth_order(false);
+    else if (f.resort != "server") throw Error("--resort '" + f.resort + "': expected server, on or off");
+    if (f.reuse_order_max_deg != "server") {
+        double degrees = -1;
         try {
-            p->set_split(v1::SPLIT_MODE_FIXED);
-            p->set_split_k(static_cast<std::uint32_t>(std::stoul(f.split)));
+            std::size_t used = 0;
+            degrees = std::stod(f.reuse_order_max_deg, &used);
+            if (used != f.reuse_order_max_deg.size()) degrees = -1;
         } catch (const std::exception&) {
-            throw Error("--split '" + f.split + "': expected off, auto or k");
+        }
+        if (!(degrees >= 0 && degrees <= 180))
+            throw Error("--reuse-order-max-deg '" + f.reuse_order_max_deg + "': expected server or degrees in 0..180");
+        p->set_reuse_order_max_degrees(degrees);
+    }
+    if (f.split == "auto") p->set_split(v1::SPLIT_MODE_AUTO);
+    else if (f.split == "off") p->set_split(v1::SPLIT_MODE_OFF);
+    else if (f.split != "server") {
+        try {
+            std::size_t used = 0;
+            const long k = std::stol(f.split, &used);
+            if (used != f.split.size() || k < 1 || k > (1L << 24)) throw std::invalid_argument(f.split);
+            p->set_split(v1::SPLIT_MODE_FIXED);
+            p->set_split_k(static_cast<std::uint32_t>(k));
+        } catch (const std::exception&) {
+            throw Error("--split '" + f.split + "': expected server, off, auto or an integer k in 1..16777216");
         }
     }
     c.set_max_unacked_frames(static_cast<std::uint32_t>(f.max_unacked));

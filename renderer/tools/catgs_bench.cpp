@@ -74,7 +74,7 @@ struct Series {
 
 struct Config {
     std::string name;
-    catgs::RenderOptions options;
+    catgs::RenderOptions options = catgs::default_pipeline_options();
 };
 
 constexpr int kStages = 10;
@@ -148,7 +148,7 @@ Result run_config(catgs::Renderer& renderer, const std::vector<catgs::Camera>& c
         r.window.values.push_back(s.window);
         r.splits.values.push_back(static_cast<double>(s.split_tasks));
         (s.key_frame ? r.key_total : r.cached_total).values.push_back(s.total_ms);
-        nlohmann::json frame{{"frame", f},           {"key_frame", s.key_frame}, {"window", s.window},
+        nlohmann::json frame{{"frame", f},           {"key_frame", s.key_frame}, {"order_reused", s.order_reused}, {"window", s.window},
                              {"pairs", s.pairs},     {"visible", s.visible},     {"arena_bytes", s.arena_bytes},
                              {"bands", s.bands},     {"tasks", s.tasks},         {"split_tasks", s.split_tasks},
                              {"split_k", s.split_k},  {"chunks", s.chunks},      {"chunks_culled", s.chunks_culled}};
@@ -206,7 +206,8 @@ int run(const Options& o) {
         throw catgs::Error("--reference '" + o.reference + "': expected none, exact or opacity-aware");
     std::vector<Config> configs;
     if (o.sweep.empty()) {
-        Config c{"single", {}};
+        Config c;
+        c.name = "single";
         catgs::cli::apply_pipeline_flags(o.pipeline, c.options);
         configs.push_back(c);
     } else {
@@ -338,7 +339,8 @@ int main(int argc, char** argv) {
     catgs::cli::add_pipeline_flags(app, o.pipeline);
     app.add_option("--sweep", o.sweep,
                    "configurations to compare, 'name: flags; name: flags' or @file with one 'name: flags' a line "
-                   "(flags as --split, --cache, --window, ...); replaces the single configuration");
+                   "(flags as --split, --cache, --window, ..., applied over the defaults, so 'plain: --cache off --split off' is "
+                   "the per-frame pipeline); replaces the single configuration");
     app.add_option("--reference", o.reference,
                    "error reference, rendered in double without cache or split: none, exact, or opacity-aware")
         ->capture_default_str();

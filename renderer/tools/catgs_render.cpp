@@ -90,7 +90,7 @@ double percentile(std::vector<double> values, double p) {
 
 int run(const Options& o) {
     const catgs::Precision precision = catgs::parse_precision(o.precision);
-    catgs::RenderOptions render_options;
+    catgs::RenderOptions render_options = catgs::default_pipeline_options();
     catgs::cli::apply_pipeline_flags(o.pipeline, render_options);
     render_options.background = parse_background(o.background);
     render_options.near_plane = o.near_plane;

@@ -4,6 +4,9 @@
 
 #include <CLI/CLI.hpp>
 
+#include <cmath>
+#include <limits>
+#include <sstream>
 #include <string>
 
 #include "catgs/cache.hpp"
@@ -12,17 +15,32 @@
 
 namespace catgs::cli {
 
+/// The flags' values; they start as default_pipeline_options(), so `--help` shows the defaults
+/// every tool and the server share.
 struct PipelineFlags {
-    std::string culling = "opacity-aware";
-    std::string split = "off";
-    double split_tail = kMinTransmittance;
-    std::string cache = "off";
-    std::string window = "adaptive";
-    int window_start = 4;
-    double guard_px = CatgsOptions{}.guard_px;
-    double guard_m = CatgsOptions{}.guard_translation;
-    std::string resort = "on";
-    std::string chunks = "on";
+    std::string culling = culling_name(default_pipeline_options().culling);
+    std::string split = split_name(default_pipeline_options().catgs);
+    double split_tail = default_pipeline_options().catgs.split_tail_transmittance;
+    std::string cache = cache_mode_name(default_pipeline_options().catgs.cache);
+    std::string window = default_pipeline_options().catgs.adaptive_window
+                             ? "adaptive"
+                             : std::to_string(default_pipeline_options().catgs.window);
+    int window_start = default_pipeline_options().catgs.window;
+    double guard_px = default_pipeline_options().catgs.guard_px;
+    double guard_m = default_pipeline_options().catgs.guard_translation;
+    std::string resort = default_pipeline_options().catgs.resort_cached ? "on" : "off";
+    std::string chunks = default_pipeline_options().chunk_culling ? "on" : "off";
+    std::string reuse_order_max_deg = angle_name(default_pipeline_options().catgs.reuse_order_max_angle);
+
+    static std::string angle_name(double radians) {
+        if (!std::isfinite(radians)) return "any";
+        std::ostringstream out;
+        out << radians * 180.0 / kPi;
+        return out.str();
+    }
+    static std::string split_name(const CatgsOptions& c) {
+        return c.split_auto ? "auto" : c.split_k > 0 ? std::to_string(c.split_k) : "off";
+    }
 };
 
 inline void add_pipeline_flags(CLI::App& app, PipelineFlags& f) {
@@ -40,7 +58,15 @@ inline void add_pipeline_flags(CLI::App& app, PipelineFlags& f) {
     app.add_option("--guard-px", f.guard_px, "cache guard band: footprint dilation and envelope radius, pixels")
         ->capture_default_str();
     app.add_option("--guard-m", f.guard_m, "cache envelope radius in metres")->capture_default_str();
-    app.add_option("--resort", f.resort, "re-sort cached lists by the current depth: on or off")->capture_default_str();
+    app.add_option("--resort", f.resort,
+                   "with the cache: on re-sorts every cached frame by the current depth; off reuses the key frame's "
+                   "depth order while the camera has turned at most --reuse-order-max-deg (faster)")
+        ->capture_default_str();
+    app.add_option("--reuse-order-max-deg", f.reuse_order_max_deg,
+                   "with --resort off: a cached frame reuses the key frame's depth order while it has turned at "
+                   "most this many degrees from the key frame (translation keeps the order), else it re-sorts; "
+                   "'any': always reuse (the paper's cache)")
+        ->capture_default_str();
     app.add_option("--chunks", f.chunks,
                    "chunk-level culling: skip the scene's spatial chunks that no pose can see (on or off; exact "
                    "culling never skips)")
@@ -91,6 +117,20 @@ inline void apply_pipeline_flags(const PipelineFlags& f, RenderOptions& options)
     c.guard_translation = f.guard_m;
     if (f.resort != "on" && f.resort != "off") throw Error("--resort '" + f.resort + "': expected on or off");
     c.resort_cached = f.resort == "on";
+    if (f.reuse_order_max_deg == "any") {
+        c.reuse_order_max_angle = std::numeric_limits<double>::infinity();
+    } else {
+        double degrees = -1;
+        try {
+            std::size_t used = 0;
+            degrees = std::stod(f.reuse_order_max_deg, &used);
+            if (used != f.reuse_order_max_deg.size()) degrees = -1;
+        } catch (const std::logic_error&) {
+        }
+        if (!(degrees >= 0 && degrees <= 180))
+            throw Error("--reuse-order-max-deg '" + f.reuse_order_max_deg + "': expected 'any' or degrees in 0..180");
+        c.reuse_order_max_angle = degrees * kPi / 180.0;
+    }
     if (f.chunks != "on" && f.chunks != "off") throw Error("--chunks '" + f.chunks + "': expected on or off");
     options.chunk_culling = f.chunks == "on";
 }
@@ -103,7 +143,10 @@ inline std::string describe_pipeline(const RenderOptions& o) {
     s += std::string(", cache ") + cache_mode_name(c.cache);
     if (c.cache != CacheMode::off)
         s += c.adaptive_window ? ", W adaptive" : ", W=" + std::to_string(c.window);
-    if (c.cache != CacheMode::off && !c.resort_cached) s += ", depth order reused";
+    if (c.cache != CacheMode::off && !c.resort_cached)
+        s += std::isfinite(c.reuse_order_max_angle)
+                 ? ", depth order reused within " + PipelineFlags::angle_name(c.reuse_order_max_angle) + " deg"
+                 : ", depth order reused";
     if (!o.chunk_culling) s += ", no chunk culling";
     return s;
 }

@@ -40,19 +40,23 @@ grpc::Status check_pose(const v1::Pose& pose, const std::string& field) {
 }  // namespace
 
 RenderOptions render_options_for(const v1::PipelineOptions& p, const v1::Color* background) {
-    RenderOptions o;
+    // Unset fields take the defaults every tool shares (default_pipeline_options: the fastest
+    // configuration at the accuracy bar, the paper's cache with split k = 8192).
+    RenderOptions o = default_pipeline_options();
     switch (p.culling()) {
     case v1::CULLING_EXACT: o.culling = Culling::exact; break;
     case v1::CULLING_BBOX3SIGMA: o.culling = Culling::bbox3sigma; break;
-    default: o.culling = Culling::opacity_aware; break;
+    case v1::CULLING_OPACITY_AWARE: o.culling = Culling::opacity_aware; break;
+    default: break;
     }
     if (background) o.background = {background->r(), background->g(), background->b()};
     if (p.near_plane() > 0) o.near_plane = p.near_plane();
     CatgsOptions& c = o.catgs;
-    // The cache is off by default: with chunk culling a full frame is as cheap as a cached one
-    // on the H200 (6M city 1080p: 1.61 ms median without the cache, 1.83 with it adaptive),
-    // and the key frames' 2.8-9 ms spikes set the p90 of a stream (README, CaT-GS pipeline).
-    c.cache = p.cache() == v1::CACHE_MODE_SPECULATIVE ? CacheMode::speculative : CacheMode::off;
+    switch (p.cache()) {
+    case v1::CACHE_MODE_OFF: c.cache = CacheMode::off; break;
+    case v1::CACHE_MODE_SPECULATIVE: c.cache = CacheMode::speculative; break;
+    default: break;
+    }
     if (p.fixed_window() > 0) {
         c.adaptive_window = false;
         c.window = static_cast<int>(p.fixed_window());
@@ -60,10 +64,18 @@ RenderOptions render_options_for(const v1::PipelineOptions& p, const v1::Color* 
         c.adaptive_window = true;
         if (p.window_start() > 0) c.window = static_cast<int>(p.window_start());
     }
-    c.resort_cached = !p.reuse_depth_order();
+    if (p.has_reuse_depth_order()) c.resort_cached = !p.reuse_depth_order();
+    if (p.has_reuse_order_max_degrees()) c.reuse_order_max_angle = p.reuse_order_max_degrees() * kPi / 180.0;
     switch (p.split()) {
+    case v1::SPLIT_MODE_OFF:
+        c.split_auto = false;
+        c.split_k = 0;
+        break;
     case v1::SPLIT_MODE_AUTO: c.split_auto = true; break;
-    case v1::SPLIT_MODE_FIXED: c.split_k = p.split_k(); break;
+    case v1::SPLIT_MODE_FIXED:
+        c.split_auto = false;
+        c.split_k = p.split_k();
+        break;
     default: break;
     }
     return o;
@@ -137,6 +149,8 @@ grpc::Status parse_session_config(const v1::SessionConfig& config, const Limits&
         return invalid(pf + "split_k", std::to_string(p.split_k()) + " is outside 1..16777216");
     if (!(std::isfinite(p.near_plane()) && p.near_plane() >= 0))
         return invalid(pf + "near_plane", num(p.near_plane()) + " is not a non-negative distance");
+    if (p.has_reuse_order_max_degrees() && !(p.reuse_order_max_degrees() >= 0 && p.reuse_order_max_degrees() <= 180))
+        return invalid(pf + "reuse_order_max_degrees", num(p.reuse_order_max_degrees()) + " is outside 0..180");
     if (config.client_name().size() > kMaxClientNameLength)
         return invalid(f + "client_name", std::to_string(config.client_name().size()) + " bytes; at most " +
                                               std::to_string(kMaxClientNameLength));

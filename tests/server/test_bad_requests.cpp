@@ -120,6 +120,13 @@ TEST_F(BadRequestTest, BadEncodingAndPipelineOptions) {
     config.mutable_pipeline()->set_fixed_window(17);
     expect_open_fails(config, grpc::StatusCode::INVALID_ARGUMENT, "open.pipeline.fixed_window: 17 is outside 0..16");
     config = session_config(v1::ENCODING_JPEG);
+    config.mutable_pipeline()->set_reuse_order_max_degrees(-0.5);
+    expect_open_fails(config, grpc::StatusCode::INVALID_ARGUMENT,
+                      "open.pipeline.reuse_order_max_degrees: -0.5 is outside 0..180");
+    config.mutable_pipeline()->set_reuse_order_max_degrees(kNaN);
+    expect_open_fails(config, grpc::StatusCode::INVALID_ARGUMENT,
+                      "open.pipeline.reuse_order_max_degrees: nan is outside 0..180");
+    config = session_config(v1::ENCODING_JPEG);
     config.set_max_unacked_frames(5);
     expect_open_fails(config, grpc::StatusCode::INVALID_ARGUMENT, "open.max_unacked_frames: 5 is outside 0..2");
 }

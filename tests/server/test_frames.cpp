@@ -169,10 +169,25 @@ TEST_F(FramesTest, PipelineOptionsMapOntoRenderOptions) {
     v1::SessionConfig config = session_config(v1::ENCODING_PNG);
     server::SessionSetup setup;
     ASSERT_TRUE(server::parse_session_config(config, {}, "open", &setup).ok());
-    EXPECT_EQ(setup.options.catgs.cache, CacheMode::off);  // off by default (measured faster)
+    // Unset fields: the defaults every tool shares, the paper's cache with split k = 8192.
+    EXPECT_EQ(setup.options.catgs.cache, CacheMode::speculative);
     EXPECT_TRUE(setup.options.catgs.adaptive_window);
     EXPECT_EQ(setup.options.culling, Culling::opacity_aware);
-    EXPECT_TRUE(setup.options.catgs.resort_cached);  // exact depth order by default
+    EXPECT_FALSE(setup.options.catgs.resort_cached);
+    EXPECT_FALSE(setup.options.catgs.split_auto);
+    EXPECT_EQ(setup.options.catgs.split_k, kDefaultSplitK);
+    EXPECT_DOUBLE_EQ(setup.options.catgs.guard_px, kDefaultGuardPx);
+    EXPECT_DOUBLE_EQ(setup.options.catgs.reuse_order_max_angle, kDefaultReuseOrderMaxAngle);
+    EXPECT_EQ(setup.options.catgs.cache, default_pipeline_options().catgs.cache);
+    // Each default can be turned off explicitly.
+    config.mutable_pipeline()->set_cache(v1::CACHE_MODE_OFF);
+    config.mutable_pipeline()->set_reuse_depth_order(false);
+    config.mutable_pipeline()->set_split(v1::SPLIT_MODE_OFF);
+    ASSERT_TRUE(server::parse_session_config(config, {}, "open", &setup).ok());
+    EXPECT_EQ(setup.options.catgs.cache, CacheMode::off);
+    EXPECT_TRUE(setup.options.catgs.resort_cached);
+    EXPECT_EQ(setup.options.catgs.split_k, 0u);
+    EXPECT_FALSE(setup.options.catgs.split_auto);
     config.mutable_pipeline()->set_cache(v1::CACHE_MODE_SPECULATIVE);
     config.mutable_pipeline()->set_reuse_depth_order(true);
     config.mutable_pipeline()->set_fixed_window(8);
@@ -187,6 +202,13 @@ TEST_F(FramesTest, PipelineOptionsMapOntoRenderOptions) {
     EXPECT_TRUE(setup.options.catgs.split_auto);
     EXPECT_EQ(setup.options.culling, Culling::bbox3sigma);
     EXPECT_DOUBLE_EQ(setup.options.near_plane, 0.5);
+    config.mutable_pipeline()->set_split(v1::SPLIT_MODE_FIXED);
+    config.mutable_pipeline()->set_split_k(300);
+    config.mutable_pipeline()->set_reuse_order_max_degrees(180);  // the paper's cache
+    ASSERT_TRUE(server::parse_session_config(config, {}, "open", &setup).ok());
+    EXPECT_DOUBLE_EQ(setup.options.catgs.reuse_order_max_angle, kPi);
+    EXPECT_FALSE(setup.options.catgs.split_auto);
+    EXPECT_EQ(setup.options.catgs.split_k, 300u);
 }
 
 TEST_F(FramesTest, UnaryRenderMatchesTheReference) {
