@@ -114,6 +114,19 @@ TEST(CatgsSplit, RaisedTailThresholdAddsBoundedError) {
     EXPECT_GE(e.psnr, 35.0);
 }
 
+// The k and angle parsers the tools' flags and catgs-client share take the whole text or nothing.
+TEST(CatgsOptionsText, SplitKAndDegreesParseWholeValuesInRange) {
+    EXPECT_EQ(parse_split_k("1"), 1u);
+    EXPECT_EQ(parse_split_k("16777216"), kMaxSplitK);
+    for (const char* bad : {"0", "-5", "16777217", "12abc", "", "1e3", "99999999999999999999"})
+        EXPECT_FALSE(parse_split_k(bad).has_value()) << bad;
+    EXPECT_EQ(parse_degrees("0"), 0.0);
+    EXPECT_EQ(parse_degrees("180"), 180.0);
+    EXPECT_EQ(parse_degrees("0.05"), 0.05);
+    for (const char* bad : {"-1", "180.5", "nan", "inf", "1e400", "5deg", ""})
+        EXPECT_FALSE(parse_degrees(bad).has_value()) << bad;
+}
+
 TEST(CatgsSplit, AutomaticKFollowsTheListLengths) {
     const Scene scene = dense_scene("auto k", 20000);
     const Camera cam = test::forward_camera(128, 96, 60.0);

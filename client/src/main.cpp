@@ -24,6 +24,7 @@
 #include <thread>
 
 #include "catgs/error.hpp"
+#include "catgs/render_options.hpp"
 #include "catgs/server/net_config.hpp"
 #include "catgs/trajectory.hpp"
 #include "stream_runner.hpp"
@@ -204,29 +205,20 @@ v1::SessionConfig make_config(const SessionFlags& f) {
     else if (f.resort == "on") p->set_reuse_depth_order(false);
     else if (f.resort != "server") throw Error("--resort '" + f.resort + "': expected server, on or off");
     if (f.reuse_order_max_deg != "server") {
-        double degrees = -1;
-        try {
-            std::size_t used = 0;
-            degrees = std::stod(f.reuse_order_max_deg, &used);
-            if (used != f.reuse_order_max_deg.size()) degrees = -1;
-        } catch (const std::exception&) {
-        }
-        if (!(degrees >= 0 && degrees <= 180))
+        const auto degrees = parse_degrees(f.reuse_order_max_deg);
+        if (!degrees)
             throw Error("--reuse-order-max-deg '" + f.reuse_order_max_deg + "': expected server or degrees in 0..180");
-        p->set_reuse_order_max_degrees(degrees);
+        p->set_reuse_order_max_degrees(*degrees);
     }
-    if (f.split == "auto") p->set_split(v1::SPLIT_MODE_AUTO);
-    else if (f.split == "off") p->set_split(v1::SPLIT_MODE_OFF);
-    else if (f.split != "server") {
-        try {
-            std::size_t used = 0;
-            const long k = std::stol(f.split, &used);
-            if (used != f.split.size() || k < 1 || k > (1L << 24)) throw std::invalid_argument(f.split);
-            p->set_split(v1::SPLIT_MODE_FIXED);
-            p->set_split_k(static_cast<std::uint32_t>(k));
-        } catch (const std::exception&) {
-            throw Error("--split '" + f.split + "': expected server, off, auto or an integer k in 1..16777216");
-        }
+    if (f.split == "auto") {
+        p->set_split(v1::SPLIT_MODE_AUTO);
+    } else if (f.split == "off") {
+        p->set_split(v1::SPLIT_MODE_OFF);
+    } else if (f.split != "server") {
+        const auto k = parse_split_k(f.split);
+        if (!k) throw Error("--split '" + f.split + "': expected server, off, auto or an integer k in 1..16777216");
+        p->set_split(v1::SPLIT_MODE_FIXED);
+        p->set_split_k(*k);
     }
     c.set_max_unacked_frames(static_cast<std::uint32_t>(f.max_unacked));
     c.set_client_name("catgs-client");

@@ -5,6 +5,7 @@
 #include <cmath>
 #include <limits>
 #include <mutex>
+#include <stdexcept>
 
 #include "catgs/error.hpp"
 #include "catgs/parallel.hpp"
@@ -508,6 +509,26 @@ Culling parse_culling(const std::string& name) {
     if (name == "bbox3sigma") return Culling::bbox3sigma;
     if (name == "opacity-aware") return Culling::opacity_aware;
     throw Error("unknown culling mode '" + name + "' (expected exact, bbox3sigma or opacity-aware)");
+}
+
+std::optional<std::uint32_t> parse_split_k(const std::string& text) {
+    try {
+        std::size_t used = 0;
+        const long k = std::stol(text, &used);
+        if (used == text.size() && k >= 1 && k <= static_cast<long>(kMaxSplitK)) return static_cast<std::uint32_t>(k);
+    } catch (const std::logic_error&) {
+    }
+    return std::nullopt;
+}
+
+std::optional<double> parse_degrees(const std::string& text) {
+    try {
+        std::size_t used = 0;
+        const double degrees = std::stod(text, &used);
+        if (used == text.size() && degrees >= 0 && degrees <= 180) return degrees;
+    } catch (const std::logic_error&) {
+    }
+    return std::nullopt;
 }
 
 const char* culling_name(Culling culling) {

@@ -15,31 +15,35 @@
 
 namespace catgs::cli {
 
-/// The flags' values; they start as default_pipeline_options(), so `--help` shows the defaults
-/// every tool and the server share.
+/// The flags' values, as text where a flag takes words; they start as
+/// default_pipeline_options(), so `--help` shows the defaults every tool and the server share.
 struct PipelineFlags {
-    std::string culling = culling_name(default_pipeline_options().culling);
-    std::string split = split_name(default_pipeline_options().catgs);
-    double split_tail = default_pipeline_options().catgs.split_tail_transmittance;
-    std::string cache = cache_mode_name(default_pipeline_options().catgs.cache);
-    std::string window = default_pipeline_options().catgs.adaptive_window
-                             ? "adaptive"
-                             : std::to_string(default_pipeline_options().catgs.window);
-    int window_start = default_pipeline_options().catgs.window;
-    double guard_px = default_pipeline_options().catgs.guard_px;
-    double guard_m = default_pipeline_options().catgs.guard_translation;
-    std::string resort = default_pipeline_options().catgs.resort_cached ? "on" : "off";
-    std::string chunks = default_pipeline_options().chunk_culling ? "on" : "off";
-    std::string reuse_order_max_deg = angle_name(default_pipeline_options().catgs.reuse_order_max_angle);
+    explicit PipelineFlags(const RenderOptions& o = default_pipeline_options())
+        : culling(culling_name(o.culling)),
+          split(o.catgs.split_auto ? "auto" : o.catgs.split_k > 0 ? std::to_string(o.catgs.split_k) : "off"),
+          split_tail(o.catgs.split_tail_transmittance),
+          cache(cache_mode_name(o.catgs.cache)),
+          window(o.catgs.adaptive_window ? "adaptive" : std::to_string(o.catgs.window)),
+          window_start(o.catgs.window),
+          guard_px(o.catgs.guard_px),
+          guard_m(o.catgs.guard_translation),
+          resort(o.catgs.resort_cached ? "on" : "off"),
+          chunks(o.chunk_culling ? "on" : "off"),
+          reuse_order_max_deg(angle_name(o.catgs.reuse_order_max_angle)) {}
 
+    std::string culling, split;
+    double split_tail;
+    std::string cache, window;
+    int window_start;
+    double guard_px, guard_m;
+    std::string resort, chunks, reuse_order_max_deg;
+
+    /// Degrees as the flag shows them; "any" for no limit.
     static std::string angle_name(double radians) {
         if (!std::isfinite(radians)) return "any";
         std::ostringstream out;
         out << radians * 180.0 / kPi;
         return out.str();
-    }
-    static std::string split_name(const CatgsOptions& c) {
-        return c.split_auto ? "auto" : c.split_k > 0 ? std::to_string(c.split_k) : "off";
     }
 };
 
@@ -81,15 +85,10 @@ inline void apply_pipeline_flags(const PipelineFlags& f, RenderOptions& options)
         c.split_k = 0;
     } else if (f.split == "auto") {
         c.split_auto = true;
+    } else if (const auto k = parse_split_k(f.split)) {
+        c.split_k = *k;
     } else {
-        try {
-            std::size_t used = 0;
-            const long k = std::stol(f.split, &used);
-            if (used != f.split.size() || k < 1 || k > (1 << 24)) throw std::invalid_argument(f.split);
-            c.split_k = static_cast<std::uint32_t>(k);
-        } catch (const std::logic_error&) {
-            throw Error("--split '" + f.split + "': expected off, auto or an integer k in 1..16777216");
-        }
+        throw Error("--split '" + f.split + "': expected off, auto or an integer k in 1..16777216");
     }
     if (!(f.split_tail >= kMinTransmittance && f.split_tail < 1.0))
         throw Error("--split-tail " + std::to_string(f.split_tail) + ": expected a transmittance in [1e-4, 1)");
@@ -119,17 +118,10 @@ inline void apply_pipeline_flags(const PipelineFlags& f, RenderOptions& options)
     c.resort_cached = f.resort == "on";
     if (f.reuse_order_max_deg == "any") {
         c.reuse_order_max_angle = std::numeric_limits<double>::infinity();
+    } else if (const auto degrees = parse_degrees(f.reuse_order_max_deg)) {
+        c.reuse_order_max_angle = *degrees * kPi / 180.0;
     } else {
-        double degrees = -1;
-        try {
-            std::size_t used = 0;
-            degrees = std::stod(f.reuse_order_max_deg, &used);
-            if (used != f.reuse_order_max_deg.size()) degrees = -1;
-        } catch (const std::logic_error&) {
-        }
-        if (!(degrees >= 0 && degrees <= 180))
-            throw Error("--reuse-order-max-deg '" + f.reuse_order_max_deg + "': expected 'any' or degrees in 0..180");
-        c.reuse_order_max_angle = degrees * kPi / 180.0;
+        throw Error("--reuse-order-max-deg '" + f.reuse_order_max_deg + "': expected 'any' or degrees in 0..180");
     }
     if (f.chunks != "on" && f.chunks != "off") throw Error("--chunks '" + f.chunks + "': expected on or off");
     options.chunk_culling = f.chunks == "on";

@@ -145,7 +145,7 @@ grpc::Status parse_session_config(const v1::SessionConfig& config, const Limits&
         return invalid(pf + "fixed_window", std::to_string(p.fixed_window()) + " is outside 0..16");
     if (p.window_start() > static_cast<std::uint32_t>(kMaxWindow))
         return invalid(pf + "window_start", std::to_string(p.window_start()) + " is outside 0..16");
-    if (p.split() == v1::SPLIT_MODE_FIXED && (p.split_k() < 1 || p.split_k() > (1u << 24)))
+    if (p.split() == v1::SPLIT_MODE_FIXED && (p.split_k() < 1 || p.split_k() > kMaxSplitK))
         return invalid(pf + "split_k", std::to_string(p.split_k()) + " is outside 1..16777216");
     if (!(std::isfinite(p.near_plane()) && p.near_plane() >= 0))
         return invalid(pf + "near_plane", num(p.near_plane()) + " is not a non-negative distance");

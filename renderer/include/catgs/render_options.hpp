@@ -3,6 +3,7 @@
 
 #include <array>
 #include <cstdint>
+#include <optional>
 #include <string>
 
 #include "catgs/cache.hpp"
@@ -30,6 +31,9 @@ struct RenderOptions {
 /// no split (1.05 ms), where k = 2048 or 4096 cost 0.1 ms; on the garden 3x3 it takes 2.16 ms
 /// against 2.55 unsplit (2048: 2.12).
 inline constexpr std::uint32_t kDefaultSplitK = 8192;
+/// The largest k accepted: k is stored with the task counters in 32 bits, and no tile list of a
+/// frame within the pair budget comes near it.
+inline constexpr std::uint32_t kMaxSplitK = 1u << 24;
 /// The default guard band: 1 px cuts the cached pairs by 12% against 2 px (city 5.2M against
 /// 5.9M) at the same number of key frames, since W, not the envelope, ends the windows there.
 inline constexpr double kDefaultGuardPx = 1.0;
@@ -62,6 +66,12 @@ inline RenderOptions default_pipeline_options() {
 /// Parses "exact", "bbox3sigma", "opacity-aware"; throws catgs::Error listing them otherwise.
 Culling parse_culling(const std::string& name);
 const char* culling_name(Culling culling);
+
+/// The whole of `text` as a split k in 1..kMaxSplitK; nullopt otherwise (flag parsers of the
+/// tools and the client word their own errors).
+std::optional<std::uint32_t> parse_split_k(const std::string& text);
+/// The whole of `text` as an angle in 0..180 degrees; nullopt otherwise.
+std::optional<double> parse_degrees(const std::string& text);
 
 /// Wall time per stage (milliseconds) and work counts of one frame.
 struct FrameStats {
