@@ -14,6 +14,9 @@
 
 #include "catgs/stages/blend.hpp"
 #include "catgs/stages/chunks.hpp"
+#include "catgs/stages/envelope.hpp"
+#include "catgs/stages/footprint.hpp"
+#include "catgs/stages/keys.hpp"
 #include "catgs/stages/project.hpp"
 #include "catgs/stages/split.hpp"
 #include "catgs/stages/tiles.hpp"
@@ -1131,16 +1134,16 @@ FrameStats CudaRenderer<T>::render(const Camera& camera, const RenderOptions& op
     stats.split_k = split_used ? tc.split_k : 0;
     stats.split_tasks = split_used ? tc.extra_tasks : 0;
     stats.tasks = tiles + stats.split_tasks;
-    stats.preprocess_ms = pre_ms;
-    stats.scan_ms = scan_ms + scan_extra_ms;
-    stats.keys_ms = emit_ms;
-    stats.sort_ms = sort_ms;
-    stats.ranges_ms = ranges_ms;
-    stats.split_ms = split_ms;
-    stats.rasterize_ms = raster_ms;
-    stats.merge_ms = merge_ms;
-    stats.copy_ms = copy_ms;
-    stats.total_ms = pre_ms + stats.scan_ms + emit_ms + sort_ms + ranges_ms + split_ms + raster_ms + merge_ms + copy_ms;
+    stats.stage_ms[catgs::Stage::preprocess] = pre_ms;
+    stats.stage_ms[catgs::Stage::scan] = scan_ms + scan_extra_ms;
+    stats.stage_ms[catgs::Stage::keys] = emit_ms;
+    stats.stage_ms[catgs::Stage::sort] = sort_ms;
+    stats.stage_ms[catgs::Stage::ranges] = ranges_ms;
+    stats.stage_ms[catgs::Stage::split] = split_ms;
+    stats.stage_ms[catgs::Stage::rasterize] = raster_ms;
+    stats.stage_ms[catgs::Stage::merge] = merge_ms;
+    stats.stage_ms[catgs::Stage::copy_out] = copy_ms;
+    stats.total_ms = stats.stage_ms.sum();
     stats.arena_bytes = m.arena_bytes();
     return stats;
 }

@@ -11,6 +11,9 @@
 #include "catgs/parallel.hpp"
 #include "catgs/stages/blend.hpp"
 #include "catgs/stages/chunks.hpp"
+#include "catgs/stages/envelope.hpp"
+#include "catgs/stages/footprint.hpp"
+#include "catgs/stages/keys.hpp"
 #include "catgs/stages/tiles.hpp"
 #include "catgs/stages/view.hpp"
 
@@ -86,7 +89,7 @@ FrameStats CpuRenderer<T>::render(const Scene& scene, const Camera& camera, cons
         window.near_plane = static_cast<T>(near);
         for (const Camera& c : plan.poses) window.views.push_back(make_view<T>(c, scene.origin, near));
         preprocess(scene, view, window, options.culling, options.chunk_culling && options.culling != Culling::exact);
-        stats.preprocess_ms = elapsed_ms(t);
+        stats.stage_ms[Stage::preprocess] = elapsed_ms(t);
         t = Clock::now();
         emit_keys(scene, window, options.culling);
         // Cached frames that re-sort re-key from the pairs in emission (Gaussian) order, so
@@ -100,7 +103,7 @@ FrameStats CpuRenderer<T>::render(const Scene& scene, const Camera& camera, cons
             emitted_keys_.clear();
             emitted_values_.clear();
         }
-        stats.keys_ms = elapsed_ms(t);
+        stats.stage_ms[Stage::keys] = elapsed_ms(t);
         sort_and_schedule(view, options, stats);
         if (frame_cache != CacheMode::off)
             planner_.key_rendered(plan, summarize(scene, window, options.culling));
@@ -108,20 +111,20 @@ FrameStats CpuRenderer<T>::render(const Scene& scene, const Camera& camera, cons
             planner_.invalidate();
     } else {
         reproject(scene, view);
-        stats.preprocess_ms = elapsed_ms(t);
+        stats.stage_ms[Stage::preprocess] = elapsed_ms(t);
         if (plan.resort) {
             t = Clock::now();
             rekey_pairs(view, options.culling);
-            stats.keys_ms = elapsed_ms(t);
+            stats.stage_ms[Stage::keys] = elapsed_ms(t);
             sort_and_schedule(view, options, stats);
         }
     }
     t = Clock::now();
     rasterize(view, options, out);
-    stats.rasterize_ms = elapsed_ms(t);
+    stats.stage_ms[Stage::rasterize] = elapsed_ms(t);
     t = Clock::now();
     merge(view, options, out);
-    stats.merge_ms = elapsed_ms(t);
+    stats.stage_ms[Stage::merge] = elapsed_ms(t);
     stats.total_ms = elapsed_ms(start);
     stats.pairs = rendered_pairs_;
     stats.tasks = tasks_.size();
@@ -139,13 +142,13 @@ template <typename T>
 void CpuRenderer<T>::sort_and_schedule(const View<T>& view, const RenderOptions& options, FrameStats& stats) {
     auto t = Clock::now();
     sort_pairs(view);
-    stats.sort_ms = elapsed_ms(t);
+    stats.stage_ms[Stage::sort] = elapsed_ms(t);
     t = Clock::now();
     find_tile_ranges(view, options.culling);
-    stats.ranges_ms = elapsed_ms(t);
+    stats.stage_ms[Stage::ranges] = elapsed_ms(t);
     t = Clock::now();
     split_k_ = build_tasks(options.catgs);
-    stats.split_ms = elapsed_ms(t);
+    stats.stage_ms[Stage::split] = elapsed_ms(t);
 }
 
 template <typename T>

@@ -8,6 +8,7 @@
 #include <CLI/CLI.hpp>
 
 #include <algorithm>
+#include <array>
 #include <cctype>
 #include <cmath>
 #include <cstdio>
@@ -16,6 +17,7 @@
 #include <nlohmann/json.hpp>
 #include <sstream>
 
+#include "catgs/common/exit_codes.hpp"
 #include "catgs/error.hpp"
 #include "catgs/renderer.hpp"
 #include "catgs/scene_io.hpp"
@@ -25,8 +27,8 @@
 
 namespace {
 
-constexpr int kExitBadInput = 2;
-constexpr int kExitFailure = 1;
+using catgs::kExitBadInput;
+using catgs::kExitFailure;
 /// PSNR of identical images is infinite; tables and plots cap it here.
 constexpr double kPsnrCap = 100.0;
 
@@ -72,59 +74,21 @@ struct Series {
     }
 };
 
-struct Config {
-    std::string name;
-    catgs::RenderOptions options = catgs::default_pipeline_options();
-};
+using Config = catgs::cli::SweepEntry;
 
-constexpr int kStages = 10;
-const char* const kStageNames[kStages] = {"preprocess", "scan", "emit", "sort", "ranges",
-                                          "split", "rasterize", "merge", "copy", "total"};
+// The stages a renderer times: all but the server's encode, which is last.
+constexpr std::size_t kRenderStages = catgs::kStageCount - 1;
+static_assert(catgs::kStages[kRenderStages] == catgs::Stage::encode);
+
+std::string stage_key(catgs::Stage stage) { return std::string(catgs::stage_name(stage)) + "_ms"; }
 
 struct Result {
     std::string name, pipeline;
-    std::vector<Series> stages = std::vector<Series>(kStages);
-    Series pairs, visible, chunks_culled, arena, key_total, cached_total, window, splits, psnr, max_abs, over_one;
+    std::array<Series, kRenderStages> stages;
+    Series total, pairs, visible, chunks_culled, arena, key_total, cached_total, window, splits, psnr, max_abs, over_one;
     std::uint64_t chunks = 0;
     nlohmann::json frames = nlohmann::json::array();
 };
-
-/// Parses "name: flags; name: flags" (or one "name: flags" per line of @file) into configs.
-std::vector<Config> parse_sweep(std::string text) {
-    if (!text.empty() && text[0] == '@') {
-        std::ifstream in(text.substr(1));
-        if (!in) throw catgs::Error("--sweep '" + text + "': cannot open the file");
-        std::stringstream all;
-        all << in.rdbuf();
-        text = all.str();
-        std::replace(text.begin(), text.end(), '\n', ';');
-    }
-    std::vector<Config> configs;
-    std::stringstream in(text);
-    std::string entry;
-    while (std::getline(in, entry, ';')) {
-        const auto first = entry.find_first_not_of(" \t\r\n");
-        if (first == std::string::npos || entry[first] == '#') continue;
-        const auto colon = entry.find(':');
-        if (colon == std::string::npos)
-            throw catgs::Error("--sweep entry '" + entry + "': expected 'name: flags'");
-        Config c;
-        c.name = entry.substr(first, colon - first);
-        while (!c.name.empty() && std::isspace(static_cast<unsigned char>(c.name.back()))) c.name.pop_back();
-        CLI::App app;
-        catgs::cli::PipelineFlags flags;
-        catgs::cli::add_pipeline_flags(app, flags);
-        try {
-            app.parse(entry.substr(colon + 1), false);
-        } catch (const CLI::ParseError& e) {
-            throw catgs::Error("--sweep entry '" + c.name + "': " + e.what());
-        }
-        catgs::cli::apply_pipeline_flags(flags, c.options);
-        configs.push_back(c);
-    }
-    if (configs.empty()) throw catgs::Error("--sweep '" + text + "': no configurations");
-    return configs;
-}
 
 Result run_config(catgs::Renderer& renderer, const std::vector<catgs::Camera>& cameras, const Config& config,
                   const Options& o, const std::vector<catgs::ImageRGB8>& references) {
@@ -137,9 +101,8 @@ Result run_config(catgs::Renderer& renderer, const std::vector<catgs::Camera>& c
     renderer.reset_cache();
     for (std::size_t f = 0; f < cameras.size(); ++f) {
         const catgs::FrameStats s = renderer.render_rgb8(cameras[f], config.options, image);
-        const double values[kStages] = {s.preprocess_ms, s.scan_ms,      s.keys_ms,  s.sort_ms, s.ranges_ms,
-                                        s.split_ms,      s.rasterize_ms, s.merge_ms, s.copy_ms, s.total_ms};
-        for (int k = 0; k < kStages; ++k) r.stages[k].values.push_back(values[k]);
+        for (std::size_t k = 0; k < kRenderStages; ++k) r.stages[k].values.push_back(s.stage_ms.ms[k]);
+        r.total.values.push_back(s.total_ms);
         r.pairs.values.push_back(static_cast<double>(s.pairs));
         r.visible.values.push_back(static_cast<double>(s.visible));
         r.chunks_culled.values.push_back(static_cast<double>(s.chunks_culled));
@@ -152,7 +115,10 @@ Result run_config(catgs::Renderer& renderer, const std::vector<catgs::Camera>& c
                              {"pairs", s.pairs},     {"visible", s.visible},     {"arena_bytes", s.arena_bytes},
                              {"bands", s.bands},     {"tasks", s.tasks},         {"split_tasks", s.split_tasks},
                              {"split_k", s.split_k},  {"chunks", s.chunks},      {"chunks_culled", s.chunks_culled}};
-        for (int k = 0; k < kStages; ++k) frame[std::string(kStageNames[k]) + "_ms"] = values[k];
+        for (std::size_t k = 0; k < kRenderStages; ++k) frame[stage_key(catgs::kStages[k])] = s.stage_ms.ms[k];
+        frame["total_ms"] = s.total_ms;
+        // The bench kit (shared/bench-kit/summarize.py) reads the copy-out time by its old name.
+        frame["copy_ms"] = s.stage_ms[catgs::Stage::copy_out];
         if (!references.empty() && f % static_cast<std::size_t>(o.error_every) == 0) {
             const catgs::ImageError e = catgs::compare(image, references[f / static_cast<std::size_t>(o.error_every)]);
             const double psnr = std::min(e.psnr, kPsnrCap);
@@ -180,7 +146,9 @@ void print_detail(const Result& r) {
     auto row = [](const char* name, const Series& s, double scale, const char* format) {
         std::printf(format, name, s.percentile(0.5) * scale, s.percentile(0.9) * scale, s.max() * scale);
     };
-    for (int k = 0; k < kStages; ++k) row(kStageNames[k], r.stages[k], 1.0, "%-13s %10.3f %10.3f %10.3f\n");
+    for (std::size_t k = 0; k < kRenderStages; ++k)
+        row(std::string(catgs::stage_name(catgs::kStages[k])).c_str(), r.stages[k], 1.0, "%-13s %10.3f %10.3f %10.3f\n");
+    row("total", r.total, 1.0, "%-13s %10.3f %10.3f %10.3f\n");
     row("key total", r.key_total, 1.0, "%-13s %10.3f %10.3f %10.3f\n");
     row("cached total", r.cached_total, 1.0, "%-13s %10.3f %10.3f %10.3f\n");
     row("pairs", r.pairs, 1.0, "%-13s %10.0f %10.0f %10.0f\n");
@@ -211,7 +179,7 @@ int run(const Options& o) {
         catgs::cli::apply_pipeline_flags(o.pipeline, c.options);
         configs.push_back(c);
     } else {
-        configs = parse_sweep(o.sweep);
+        configs = catgs::cli::parse_sweep(o.sweep);
     }
 
     catgs::LoadOptions load;
@@ -269,7 +237,7 @@ int run(const Options& o) {
     }
     nlohmann::json doc_results = nlohmann::json::array();
     for (const Result& r : results) {
-        const Series& total = r.stages[kStages - 1];
+        const Series& total = r.total;
         std::printf("%-22s %9.3f %9.3f %9.3f %9.3f %9.3f %10.0f %8.2f %8.2f %6.0f %5.0f\n", r.name.c_str(),
                     total.percentile(0.5), total.percentile(0.9), total.max(), r.key_total.percentile(0.5),
                     r.cached_total.percentile(0.5), r.pairs.percentile(0.5), r.psnr.mean(), r.psnr.min(),
@@ -281,7 +249,9 @@ int run(const Options& o) {
                 << "," << r.psnr.mean() << "," << r.psnr.min() << "," << r.max_abs.max() << "," << r.over_one.max()
                 << "," << r.window.percentile(0.5) << "\n";
         nlohmann::json stages;
-        for (int k = 0; k < kStages; ++k) stages[kStageNames[k]] = stats_json(r.stages[k]);
+        for (std::size_t k = 0; k < kRenderStages; ++k)
+            stages[std::string(catgs::stage_name(catgs::kStages[k]))] = stats_json(r.stages[k]);
+        stages["total"] = stats_json(r.total);
         doc_results.push_back({{"name", r.name},
                                {"pipeline", r.pipeline},
                                {"stages_ms", stages},

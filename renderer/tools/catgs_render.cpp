@@ -10,6 +10,7 @@
 #include <nlohmann/json.hpp>
 #include <sstream>
 
+#include "catgs/common/exit_codes.hpp"
 #include "catgs/error.hpp"
 #include "catgs/renderer.hpp"
 #include "catgs/scene_io.hpp"
@@ -20,8 +21,8 @@
 
 namespace {
 
-constexpr int kExitBadInput = 2;
-constexpr int kExitFailure = 1;
+using catgs::kExitBadInput;
+using catgs::kExitFailure;
 
 struct Options {
     std::string scene = "builtin:city?gaussians=200000&seed=1";
@@ -44,28 +45,6 @@ struct Options {
     bool json = false;
     bool quiet = false;
 };
-
-std::array<float, 3> parse_background(const std::string& text) {
-    std::array<float, 3> rgb{};
-    std::stringstream in(text);
-    std::string part;
-    int i = 0;
-    while (std::getline(in, part, ',')) {
-        if (i >= 3) throw catgs::Error("--background '" + text + "': expected three numbers r,g,b");
-        try {
-            std::size_t used = 0;
-            rgb[i] = std::stof(part, &used);
-            if (used != part.size()) throw std::invalid_argument(part);
-        } catch (const std::exception&) {
-            throw catgs::Error("--background '" + text + "': '" + part + "' is not a number");
-        }
-        if (!(rgb[i] >= 0.0f && rgb[i] <= 1.0f))
-            throw catgs::Error("--background '" + text + "': each component must be in [0, 1]");
-        ++i;
-    }
-    if (i != 3) throw catgs::Error("--background '" + text + "': expected three numbers r,g,b");
-    return rgb;
-}
 
 /// File name for a frame: the camera's name (cameras.json img_name) without extension and
 /// directory, else the zero-padded frame index.
@@ -92,7 +71,7 @@ int run(const Options& o) {
     const catgs::Precision precision = catgs::parse_precision(o.precision);
     catgs::RenderOptions render_options = catgs::default_pipeline_options();
     catgs::cli::apply_pipeline_flags(o.pipeline, render_options);
-    render_options.background = parse_background(o.background);
+    render_options.background = catgs::cli::parse_background(o.background);
     render_options.near_plane = o.near_plane;
     if (!(o.near_plane > 0)) throw catgs::Error("--near must be positive");
     if (o.format != "png" && o.format != "exr") throw catgs::Error("--format '" + o.format + "': expected png or exr");
@@ -159,16 +138,24 @@ int run(const Options& o) {
                 catgs::write_image(file, image8);
         }
         if (o.json) {
-            frames.push_back({{"frame", i}, {"file", file}, {"total_ms", s.total_ms},
-                              {"preprocess_ms", s.preprocess_ms}, {"keys_ms", s.keys_ms}, {"sort_ms", s.sort_ms},
-                              {"ranges_ms", s.ranges_ms}, {"split_ms", s.split_ms}, {"rasterize_ms", s.rasterize_ms},
-                              {"merge_ms", s.merge_ms}, {"visible", s.visible}, {"pairs", s.pairs},
-                              {"key_frame", s.key_frame}, {"window", s.window}, {"split_tasks", s.split_tasks}});
+            nlohmann::json frame{{"frame", i},           {"file", file},     {"total_ms", s.total_ms},
+                                 {"visible", s.visible},   {"pairs", s.pairs}, {"key_frame", s.key_frame},
+                                 {"window", s.window},     {"split_tasks", s.split_tasks}};
+            for (catgs::Stage stage : catgs::kStages)
+                if (stage != catgs::Stage::encode)
+                    frame[std::string(catgs::stage_name(stage)) + "_ms"] = s.stage_ms[stage];
+            frames.push_back(std::move(frame));
         } else {
-            std::printf("frame %5zu %s W=%-2d %8.2f ms  (preprocess %.2f, keys %.2f, sort %.2f, ranges %.2f, "
-                        "split %.2f, rasterize %.2f, merge %.2f)  visible %llu  pairs %llu  splits %llu\n",
-                        i, s.key_frame ? "key   " : "cached", s.window, s.total_ms, s.preprocess_ms, s.keys_ms,
-                        s.sort_ms, s.ranges_ms, s.split_ms, s.rasterize_ms, s.merge_ms,
+            std::string stages;
+            for (catgs::Stage stage : catgs::kStages) {
+                if (stage == catgs::Stage::encode) continue;
+                char part[64];
+                std::snprintf(part, sizeof part, "%s%s %.2f", stages.empty() ? "" : ", ",
+                              std::string(catgs::stage_name(stage)).c_str(), s.stage_ms[stage]);
+                stages += part;
+            }
+            std::printf("frame %5zu %s W=%-2d %8.2f ms  (%s)  visible %llu  pairs %llu  splits %llu\n", i,
+                        s.key_frame ? "key   " : "cached", s.window, s.total_ms, stages.c_str(),
                         static_cast<unsigned long long>(s.visible), static_cast<unsigned long long>(s.pairs),
                         static_cast<unsigned long long>(s.split_tasks));
             std::fflush(stdout);

@@ -8,7 +8,8 @@
 
 #include "catgs/cache.hpp"
 #include "catgs/constants.hpp"
-#include "catgs/stages/tiles.hpp"
+#include "catgs/stage.hpp"
+#include "catgs/stages/culling.hpp"
 
 namespace catgs {
 
@@ -63,10 +64,6 @@ inline RenderOptions default_pipeline_options() {
     return o;
 }
 
-/// Parses "exact", "bbox3sigma", "opacity-aware"; throws catgs::Error listing them otherwise.
-Culling parse_culling(const std::string& name);
-const char* culling_name(Culling culling);
-
 /// The whole of `text` as a split k in 1..kMaxSplitK; nullopt otherwise (flag parsers of the
 /// tools and the client word their own errors).
 std::optional<std::uint32_t> parse_split_k(const std::string& text);
@@ -87,11 +84,11 @@ struct FrameStats {
     std::uint64_t tasks = 0;    ///< rasterizer tasks: tiles plus extra split sub-tasks
     std::uint64_t split_tasks = 0;  ///< extra sub-tasks from splitting
     std::uint32_t split_k = 0;  ///< the k used this frame (0: no splitting)
-    /// keys_ms covers the emit pass, scan_ms the prefix sum of tile counts (the CPU backend
-    /// folds its scan into keys_ms), copy_ms the copy of the image to the host (GPU).
-    /// split_ms covers building the task list, merge_ms the merge of split sub-tasks.
-    double preprocess_ms = 0, scan_ms = 0, keys_ms = 0, sort_ms = 0, ranges_ms = 0, split_ms = 0, rasterize_ms = 0,
-           merge_ms = 0, copy_ms = 0, total_ms = 0;
+    /// Wall time of each stage (stage.hpp). The CPU backend folds scan into keys and has no
+    /// copy_out; encode is the server's.
+    StageTimes stage_ms;
+    /// The whole frame: the sum of the stages on the GPU (CUDA events), wall time on the CPU.
+    double total_ms = 0;
 };
 
 }  // namespace catgs
