@@ -1,6 +1,6 @@
-// Limits (README, "Limits"): message sizes, the client name, the pose rate, per-session
-// renderer memory, the stall watchdog for clients that stop reading, and the renderer pool of
-// unary renders.
+// Limits (docs/limits-and-errors.md, "Limits"): message sizes, the client name, the pose rate,
+// per-session renderer memory, the stall watchdog for clients that stop reading, and the
+// renderer pool of unary renders.
 #include "fake_device.hpp"
 #include "server_test_util.hpp"
 
