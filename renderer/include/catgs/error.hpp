@@ -1,5 +1,5 @@
-// The one exception type of catgs. Its message is the user-facing one-line error: it names
-// the input (file, flag or field), the problem, and where it was found.
+// The exception type of catgs. Its message is the user-facing one-line error: it names the
+// input (file, flag or field), the problem, and where it was found.
 #pragma once
 
 #include <stdexcept>
@@ -10,6 +10,13 @@ namespace catgs {
 class Error : public std::runtime_error {
 public:
     explicit Error(const std::string& message) : std::runtime_error(message) {}
+};
+
+/// Device memory ran out. Unlike other errors the request may succeed later or smaller, and
+/// the server ends the session (freeing its buffers) instead of answering one frame.
+class OutOfMemoryError : public Error {
+public:
+    using Error::Error;
 };
 
 }  // namespace catgs
