@@ -41,7 +41,7 @@ struct SceneRegistry::Lease::State {
         std::shared_ptr<const Scene> scene;
         SceneSummary summary;  // sessions and unloading kept current
     };
-    mutable std::mutex mutex;
+    mutable std::mutex mutex;  // a leaf: on_freed runs outside it (lock order: server_core.hpp)
     std::map<std::string, Entry> scenes;
     std::uint64_t bytes = 0;  // host bytes of every loaded scene
     std::function<void(const Scene*)> on_freed;

@@ -162,7 +162,7 @@ void Server::begin_shutdown() {
     set_health(server_.get(), false);
     set_health(health_server_.get(), false);
     core_->admission().drain();
-    for (const auto& session : core_->streams()) session->drain({grpc::StatusCode::UNAVAILABLE, kDrainMessage});
+    for (const auto& session : core_->streams()) session->drain(shutting_down_status());
 }
 
 void Server::shutdown(std::chrono::milliseconds grace) {

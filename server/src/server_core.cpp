@@ -3,7 +3,6 @@
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
-#include <new>
 
 #include "catgs/server/stream_session.hpp"
 
@@ -39,12 +38,6 @@ ServerCore::ServerCore(ServerOptions options)
 ServerCore::~ServerCore() {
     stop_workers();
     scenes_.set_on_freed(nullptr);
-}
-
-bool is_out_of_memory(const std::exception& e) {
-    if (dynamic_cast<const std::bad_alloc*>(&e)) return true;
-    const std::string what = e.what();
-    return what.find("cudaErrorMemoryAllocation") != std::string::npos || what.find("out of memory") != std::string::npos;
 }
 
 grpc::Status ServerCore::authorize(const grpc::CallbackServerContext* context) const {

@@ -4,7 +4,7 @@
 
 #include <chrono>
 
-#include "catgs/server/encoder.hpp"
+#include "catgs/server/frame_messages.hpp"
 #include "catgs/server/stream_session.hpp"
 #include "catgs/server/wire.hpp"
 
@@ -13,17 +13,11 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 
-double ms_between(Clock::time_point a, Clock::time_point b) {
-    return std::chrono::duration<double, std::milli>(b - a).count();
-}
-
 grpc::ServerUnaryReactor* finish_now(grpc::CallbackServerContext* context, const grpc::Status& status) {
     grpc::ServerUnaryReactor* reactor = context->DefaultReactor();
     reactor->Finish(status);
     return reactor;
 }
-
-const grpc::Status kDraining{grpc::StatusCode::UNAVAILABLE, "server is shutting down: reconnect to another instance"};
 
 }  // namespace
 
@@ -65,67 +59,40 @@ grpc::ServerUnaryReactor* RenderServiceImpl::Render(grpc::CallbackServerContext*
         const Clock::time_point begin = Clock::now();
         FrameStats stats;
         const std::uint64_t max_bytes = core.options().limits.max_session_bytes;
-        try {
+        const std::optional<RenderFailure> failure = catch_render_failure([&] {
             // Renderers are pooled across unary calls (making one is slow on CUDA).
             auto renderer = core.acquire_unary_renderer(job->lease->scene());
             stats = renderer->render_rgb8(job->frame.camera, job->setup.options, job->image);
             // Over the memory limit: the renderer's grow-only arenas are not kept.
             if (max_bytes == 0 || stats.arena_bytes <= max_bytes)
                 core.release_unary_renderer(std::move(renderer), job->lease->scene(), job->setup.scene_id);
-        } catch (const std::exception& e) {
-            if (is_out_of_memory(e)) {
-                core.counters().out_of_memory++;
-                reactor->Finish({grpc::StatusCode::RESOURCE_EXHAUSTED,
-                                 std::string("out-of-memory: the render failed (") + e.what() +
-                                     "); lower the resolution, retry later or use another server"});
-            } else {
-                reactor->Finish({grpc::StatusCode::INTERNAL, std::string("render failed: ") + e.what()});
-            }
+        });
+        if (failure) {
+            if (failure->out_of_memory) core.counters().out_of_memory++;
+            reactor->Finish(render_failure_status(*failure, /*size=*/""));
             return;
         }
         if (max_bytes > 0 && stats.arena_bytes > max_bytes) {
             core.counters().out_of_memory++;
-            reactor->Finish({grpc::StatusCode::RESOURCE_EXHAUSTED,
-                             "max-session-memory: rendering scene '" + job->setup.scene_id + "' needed " +
-                                 std::to_string(stats.arena_bytes) + " bytes of renderer memory; this server allows " +
-                                 std::to_string(max_bytes) + " per session; lower the resolution"});
+            reactor->Finish(session_memory_status(job->setup.scene_id, /*size=*/"", stats.arena_bytes, max_bytes));
             return;
         }
-        const Clock::time_point rendered = Clock::now();
-        v1::Frame& out = job->frame_out;
-        out.set_sequence(job->frame.sequence);
-        out.set_encoding(to_proto(job->setup.encode.format));
-        out.set_width(static_cast<std::uint32_t>(job->image.width));
-        out.set_height(static_cast<std::uint32_t>(job->image.height));
-        out.set_client_timestamp_us(job->frame.client_timestamp_us);
-        out.mutable_timings()->set_queue_ms(ms_between(job->received, begin));
-        out.mutable_timings()->set_render_ms(ms_between(begin, rendered));
-        auto* cache = out.mutable_cache();
-        cache->set_key_frame(stats.key_frame);
-        cache->set_window(static_cast<std::uint32_t>(stats.window));
-        cache->set_render_length(stats.pairs);
-        cache->set_visible(stats.visible);
-        cache->set_split_k(stats.split_k);
+        job->frame_out = rendered_frame(job->frame, job->setup.encode.format, job->image, stats,
+                                        {job->received, begin, Clock::now()});
         const bool encoding = core.encode_pool().post([job, reactor, response] {
-            const Clock::time_point start = Clock::now();
             v1::Frame& out = job->frame_out;
-            try {
-                encode_image(job->image, job->setup.encode, *out.mutable_data());
-            } catch (const std::exception& e) {
-                reactor->Finish({grpc::StatusCode::INTERNAL, std::string("encoding failed: ") + e.what()});
+            if (grpc::Status status = encode_frame(job->image, job->setup.encode, job->received, out); !status.ok()) {
+                reactor->Finish(status);
                 return;
             }
-            const Clock::time_point done = Clock::now();
-            out.mutable_timings()->set_encode_ms(ms_between(start, done));
-            out.mutable_timings()->set_total_ms(ms_between(job->received, done));
             out.mutable_stats()->set_frames_sent(1);
             serialize_message(out, response);
             reactor->Finish(grpc::Status::OK);
         });
-        if (!encoding) reactor->Finish(kDraining);
+        if (!encoding) reactor->Finish(shutting_down_status());
         else core.counters().frames_sent++;
     });
-    if (!posted) reactor->Finish(kDraining);
+    if (!posted) reactor->Finish(shutting_down_status());
     return reactor;
 }
 
@@ -155,7 +122,7 @@ grpc::ServerUnaryReactor* SceneServiceImpl::LoadScene(grpc::CallbackServerContex
     auto request = std::make_shared<v1::LoadSceneRequest>();
     if (!parse_message(*request_bytes, request.get()))
         return finish_now(context, malformed_request("LoadSceneRequest", *request_bytes));
-    if (core_.admission().draining()) return finish_now(context, kDraining);
+    if (core_.admission().draining()) return finish_now(context, shutting_down_status());
     grpc::ServerUnaryReactor* reactor = context->DefaultReactor();
     // Loading reads and validates a whole file (seconds for big scenes): off the gRPC threads.
     const bool posted = core_.admin_pool().post([this, request, response, reactor] {
@@ -172,7 +139,7 @@ grpc::ServerUnaryReactor* SceneServiceImpl::LoadScene(grpc::CallbackServerContex
         }
         reactor->Finish(status);
     });
-    if (!posted) reactor->Finish(kDraining);
+    if (!posted) reactor->Finish(shutting_down_status());
     return reactor;
 }
 

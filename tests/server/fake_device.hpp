@@ -1,7 +1,7 @@
 // A simulated GPU for the CPU backend (ServerOptions::renderer_factory): renderers that render
 // on the CPU but account "device memory" the way the CUDA backend holds it (one shared copy of
 // each scene, plus per-session arenas proportional to the image) and fail the way it fails
-// when that memory runs out (catgs::Error naming cudaErrorMemoryAllocation).
+// when that memory runs out (catgs::OutOfMemoryError naming cudaErrorMemoryAllocation).
 #pragma once
 
 #include <functional>
@@ -36,8 +36,8 @@ private:
         if (entry.holders == 0) {
             if (used_ + bytes > capacity_) {
                 scenes_.erase(scene);
-                throw Error("CUDA error in cudaMalloc(&scene->positions) at device_buffer.hpp:48: "
-                            "cudaErrorMemoryAllocation: out of memory");
+                throw OutOfMemoryError("CUDA error in cudaMalloc(&scene->positions) at device_buffer.hpp:48: "
+                                       "cudaErrorMemoryAllocation: out of memory");
             }
             used_ += bytes;
             entry.bytes = bytes;

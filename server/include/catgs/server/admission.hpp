@@ -37,6 +37,13 @@ struct Limits {
     int stall_timeout_ms = 20000;
 };
 
+/// The status of every call refused or ended because the server is draining (shutting down):
+/// UNAVAILABLE, so that clients reconnect, behind a load balancer to another instance.
+inline grpc::Status shutting_down_status() {
+    return {grpc::StatusCode::UNAVAILABLE,
+            "server is shutting down: reconnect (to this address or another instance) and resume from your last pose"};
+}
+
 class Admission {
 public:
     explicit Admission(int max_sessions) : max_sessions_(max_sessions) {}
@@ -56,8 +63,7 @@ public:
     /// A ticket, or a status: UNAVAILABLE while draining, RESOURCE_EXHAUSTED at the limit.
     grpc::Status admit(std::unique_ptr<Ticket>* ticket) {
         std::lock_guard lock(mutex_);
-        if (draining_)
-            return {grpc::StatusCode::UNAVAILABLE, "server is shutting down: reconnect to another instance"};
+        if (draining_) return shutting_down_status();
         if (active_ >= max_sessions_)
             return {grpc::StatusCode::RESOURCE_EXHAUSTED,
                     "max-sessions: the server already runs " + std::to_string(active_) + " of " +
@@ -85,7 +91,7 @@ private:
         std::lock_guard lock(mutex_);
         --active_;
     }
-    mutable std::mutex mutex_;
+    mutable std::mutex mutex_;  // a leaf: nothing is locked under it (lock order: server_core.hpp)
     int max_sessions_;
     int active_ = 0;
     bool draining_ = false;

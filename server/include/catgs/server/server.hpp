@@ -48,13 +48,9 @@ private:
     std::unique_ptr<grpc::CallbackGenericService> health_generic_;
     std::unique_ptr<grpc::Server> health_server_;
     int port_ = 0, health_port_ = 0;
-    std::mutex mutex_;
+    std::mutex mutex_;  // a leaf, released before calling into the core (lock order: server_core.hpp)
     std::condition_variable stopped_cv_;
     bool shutting_down_ = false, stopped_ = false;
 };
-
-/// Message every open stream receives when the server drains.
-inline constexpr const char* kDrainMessage =
-    "server is shutting down: reconnect (to this address or another instance) and resume from your last pose";
 
 }  // namespace catgs::server

@@ -114,6 +114,13 @@ private:
     void watchdog();
     void drop_pooled(const Scene* scene);
 
+    // The server's locks, and which may be held while taking which (no other nesting exists;
+    // callbacks and destructors that take a lock run after the caller's lock is released):
+    //   StreamSession::mutex_ -> Admission's, SceneRegistry's and WorkerPool's mutexes
+    //                            (admit, acquire_scene and post while handling a request);
+    //   pool_mutex_           -> SceneRegistry's mutex (release_unary_renderer checks the scene);
+    // and taken alone: streams_mutex_, watchdog_mutex_, Server::mutex_. The SceneRegistry calls
+    // its on_freed listener (drop_pooled, which takes pool_mutex_) outside its own lock.
     ServerOptions options_;
     SceneRegistry scenes_;
     Admission admission_;
@@ -136,8 +143,5 @@ private:
     bool watchdog_stop_ = false;
     std::thread watchdog_;
 };
-
-/// True when `e` says that memory ran out (std::bad_alloc, or a CUDA allocation error).
-bool is_out_of_memory(const std::exception& e);
 
 }  // namespace catgs::server

@@ -6,12 +6,14 @@
 // Threads: reactions (OnReadDone, OnWriteDone, OnCancel, OnDone) run on gRPC threads and only
 // move data and flags under `mutex_`; rendering runs on the render pool and encoding on the
 // encoder pool; StartWrite/Finish are called from whichever thread completes a step, never
-// while holding `mutex_` (gRPC may run a reaction inline).
+// while holding `mutex_` (gRPC may run a reaction inline). The session's states are named
+// phases (Phase); each step decides under the lock what to do next (plan_locked) and does it
+// after unlocking (run).
 //
 // Backpressure (latest wins, bounded memory):
 // - input: one pending pose; a newer request replaces it (poses_coalesced); frame requests
-//   beyond Limits::max_pose_rate are not refused but read later (a token bucket; the next
-//   read waits on an alarm), so HTTP/2 flow control slows the client down;
+//   beyond Limits::max_pose_rate are not refused but read later (TokenBucket; the next read
+//   waits on an alarm), so HTTP/2 flow control slows the client down;
 // - credits: at most max_unacked_frames frames rendered but not acknowledged by the client
 //   (FrameRequest.last_received_sequence); while over budget nothing is rendered;
 // - output: one frame in flight in gRPC plus one waiting; a newer encoded frame replaces the
@@ -19,8 +21,9 @@
 // - stalls: a frame in flight longer than Limits::stall_timeout_ms (the client stopped
 //   reading) gets the call cancelled by the server's watchdog (cancel_if_stalled).
 //
-// Finish is never called while a write, a postponed read or a watchdog cancel is under way:
-// each of those calls into gRPC from outside a reaction, which is only safe before Finish.
+// Finish is never called while a write, a postponed read or a watchdog cancel is under way
+// (UnderWay): each of those calls into gRPC from outside a reaction, which is only safe before
+// Finish. The session waits in Phase::finishing until ready_to_finish_locked().
 #pragma once
 
 #include <grpcpp/alarm.h>
@@ -37,6 +40,7 @@
 #include "catgs/renderer.hpp"
 #include "catgs/server/request_validation.hpp"
 #include "catgs/server/server_core.hpp"
+#include "catgs/server/token_bucket.hpp"
 #include "catgs/v1/catgs.grpc.pb.h"
 
 namespace catgs::server {
@@ -64,7 +68,34 @@ public:
     void OnDone() override;
 
 private:
-    enum class Phase { awaiting_open, opening, open };
+    /// Where the call is. Phases only move forward, and finishing may follow any earlier one.
+    /// Rendering and encoding run beside them on the worker pools; calls into gRPC from outside
+    /// a reaction are tracked apart, in `under_way_`.
+    enum class Phase {
+        /// Reading the first message, which must be StreamRequest.open. Nothing renders.
+        awaiting_open,
+        /// Admitted (ticket_ and lease_ held); a render worker is making the renderer
+        /// (initialise). Frame requests are read (a bad one gets its error frame); the newest
+        /// waits in pending_, none renders.
+        opening,
+        /// renderer_ is made: the pending pose renders when credit allows, frames are written.
+        open,
+        /// The end is decided (finish_status_): nothing more is read, queued or rendered, and
+        /// work still running is dropped when it completes. Finish waits for
+        /// ready_to_finish_locked().
+        finishing,
+        /// Finish has been called; gRPC calls OnDone next.
+        finished,
+    };
+
+    /// Calls into gRPC made from outside a reaction. They are safe only before Finish (after
+    /// it the call may end at any moment), so Finish waits until none is under way.
+    struct UnderWay {
+        bool write = false;            ///< StartWrite of in_flight_buffer_; OnWriteDone has not run
+        bool postponed_read = false;   ///< the next read waits on read_alarm_, or its StartRead is being made
+        bool watchdog_cancel = false;  ///< cancel_if_stalled is calling TryCancel
+        bool any() const { return write || postponed_read || watchdog_cancel; }
+    };
 
     struct PendingPose {
         FrameSetup frame;
@@ -75,8 +106,10 @@ private:
     void handle_frame(const v1::FrameRequest& request);
     void initialise();   // render pool: make the renderer
     void render_next();  // render pool: render the newest pose
-    /// Encoder pool or reactions: queue for writing. `pose` is the view an image frame shows.
-    void deliver(v1::Frame frame, bool image, const Pose* pose = nullptr);
+    void render(PendingPose pose);  // render pool: render_next's render and the encode it posts
+    /// Encoder or render pool: queues an image frame (or its encoding error) for writing;
+    /// `view` is the pose it shows.
+    void deliver(v1::Frame frame, const Pose& view);
     /// Render pool: answers `pose` with the bytes of the last frame sent, which showed the same
     /// view, instead of rendering it again.
     void resend_last(PendingPose pose, std::string data);
@@ -88,14 +121,19 @@ private:
         bool cancel_alarm = false;  // a postponed read is no longer wanted
         std::optional<grpc::Status> finish;
     };
+    bool ending_locked() const { return phase_ == Phase::finishing || phase_ == Phase::finished; }
+    /// The finish condition: the end is decided and nothing outside a reaction is still
+    /// calling into gRPC.
+    bool ready_to_finish_locked() const { return phase_ == Phase::finishing && !under_way_.any(); }
+    /// The client half-closed and everything it asked for has been answered: the stream ends OK.
+    bool served_locked() const;
     void plan_locked(Actions& actions);
+    void choose_write_locked(Actions& actions);
     void request_finish_locked(const grpc::Status& status);
     void run(const Actions& actions);
     void drop_unacked_locked(std::uint64_t sequence);
     void set_buffered_locked(int frames, std::int64_t bytes);
     void error_frame_locked(std::uint64_t sequence, const grpc::Status& status);
-    /// Takes a token for a frame request; returns how long to wait before the next read.
-    Clock::duration take_token_locked(Clock::time_point now);
     void postpone_read(Clock::duration delay);
     void on_read_alarm();
 
@@ -109,22 +147,26 @@ private:
     grpc::ByteBuffer request_buffer_;  // the one read in flight
     v1::StreamRequest request_;        // its parsed contents
 
+    // Guards everything below. Held only to move data and flags, never while calling into
+    // gRPC or running a render or an encode; while holding it the session takes only the
+    // admission, scene registry and worker pool locks (see ServerCore for the lock order).
     std::mutex mutex_;
     Phase phase_ = Phase::awaiting_open;
+    grpc::Status finish_status_;  // from finishing on: what the stream ends with
+    UnderWay under_way_;
     SessionSetup setup_;
     std::unique_ptr<Admission::Ticket> ticket_;
     std::unique_ptr<SceneRegistry::Lease> lease_;
     std::unique_ptr<Renderer> renderer_;  // used by one render task at a time
 
-    std::optional<PendingPose> pending_;
+    std::optional<PendingPose> pending_;  // the newest pose not yet taken by a render task
     std::uint64_t last_request_sequence_ = 0;
     std::uint64_t last_ack_ = 0;
     std::deque<std::uint64_t> unacked_;  // frames rendered (or rendering) and not acknowledged
-    bool reads_done_ = false;
+    bool reads_done_ = false;   // the client half-closed (or the call broke)
     bool render_busy_ = false;  // a render task is queued or running
-    int encoding_ = 0;          // frames being encoded
+    int encoding_ = 0;          // frames being rendered for encoding, or encoded
 
-    bool write_in_flight_ = false;
     Clock::time_point write_started_;
     v1::Frame in_flight_;                 // chosen for writing; cleared once serialized
     grpc::ByteBuffer in_flight_buffer_;   // owned by gRPC between StartWrite and OnWriteDone
@@ -140,16 +182,8 @@ private:
     int buffered_frames_ = 0;
     std::int64_t buffered_bytes_ = 0;
 
-    std::optional<grpc::Status> finish_wanted_;
-    bool finished_ = false;
-    grpc::Status final_status_;
-
-    // Pose-rate limit: a token bucket; while read_delayed_ the next read waits on read_alarm_.
-    double tokens_ = 0;
-    Clock::time_point tokens_at_;
-    bool read_delayed_ = false;
+    TokenBucket pose_rate_;  // while under_way_.postponed_read the next read waits on read_alarm_
     std::unique_ptr<grpc::Alarm> read_alarm_;
-    bool cancelling_ = false;  // the watchdog is cancelling the call
 
     // Session statistics (for Frame.stats and the close log line).
     struct Counters {

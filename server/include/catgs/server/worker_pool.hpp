@@ -30,7 +30,7 @@ private:
     void run();
 
     std::string name_;
-    mutable std::mutex mutex_;
+    mutable std::mutex mutex_;  // a leaf, never held while a task runs (lock order: server_core.hpp)
     std::condition_variable wake_;
     std::deque<std::function<void()>> tasks_;
     bool stopping_ = false;
