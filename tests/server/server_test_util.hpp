@@ -1,17 +1,23 @@
-// Helpers of the server integration tests: an in-process server on 127.0.0.1:0 with a small
-// built-in city, stream clients, image decoders and the reference renderer.
+// The one fixture of the server integration tests: an in-process server on 127.0.0.1:0 with a
+// small built-in city (per test, or shared by a suite: SharedServerTest), stream clients, a
+// healthy background stream, unary and SceneService calls, image decoders and the reference
+// renderer.
 #pragma once
 
 #include <gtest/gtest.h>
 #include <grpcpp/grpcpp.h>
 #include <png.h>
 #include <turbojpeg.h>
+#include <unistd.h>
 
+#include <atomic>
 #include <chrono>
+#include <filesystem>
 #include <fstream>
 #include <memory>
 #include <string>
 #include <thread>
+#include <vector>
 
 #include "catgs/image.hpp"
 #include "catgs/renderer.hpp"
@@ -119,7 +125,6 @@ inline v1::StreamRequest frame_message(const v1::FrameRequest& frame) {
     return r;
 }
 
-/// A synchronous stream: open it, then send/receive.
 using HealthStatus = grpc::health::v1::HealthCheckResponse;
 
 /// grpc.health.v1.Health/Check of `service` ("" = the whole server) over `channel`, with a
@@ -137,6 +142,42 @@ inline HealthStatus::ServingStatus health(const std::shared_ptr<grpc::Channel>& 
     return s.ok() ? response.status() : HealthStatus::UNKNOWN;
 }
 
+/// The same over a plaintext channel to `port`.
+inline HealthStatus::ServingStatus health(int port, const std::string& service, grpc::Status* status = nullptr) {
+    return health(channel_to(port), service, status);
+}
+
+/// The whole server reports SERVING on `port`.
+inline bool serving(int port) { return health(port, "") == HealthStatus::SERVING; }
+
+/// A unary RenderService.Render request.
+inline v1::RenderRequest render_request(const v1::SessionConfig& config, const v1::FrameRequest& frame) {
+    v1::RenderRequest r;
+    *r.mutable_config() = config;
+    *r.mutable_frame() = frame;
+    return r;
+}
+
+/// RenderService.Render over `channel`; the frame in *frame.
+inline grpc::Status render_once(const std::shared_ptr<grpc::Channel>& channel, const v1::RenderRequest& request,
+                                v1::Frame* frame) {
+    auto stub = v1::RenderService::NewStub(channel);
+    grpc::ClientContext context;
+    return stub->Render(&context, request, frame);
+}
+
+/// SceneService.LoadScene of `source` as `id` ("": the server derives it); the scene in *info.
+inline grpc::Status load_scene_call(v1::SceneService::Stub& stub, const std::string& source, const std::string& id,
+                                    v1::SceneInfo* info = nullptr) {
+    grpc::ClientContext context;
+    v1::LoadSceneRequest request;
+    request.set_source(source);
+    request.set_scene_id(id);
+    v1::SceneInfo ignored;
+    return stub.LoadScene(&context, request, info ? info : &ignored);
+}
+
+/// A synchronous stream: open it, then send/receive.
 struct StreamClient {
     grpc::ClientContext context;
     std::unique_ptr<v1::RenderService::Stub> stub;
@@ -165,6 +206,19 @@ struct StreamClient {
         return stream->Finish();
     }
 };
+
+/// A new stream with `config` gets a frame for its first pose, and closes OK.
+inline void expect_one_frame(const std::shared_ptr<grpc::Channel>& channel,
+                             const v1::SessionConfig& config = session_config(v1::ENCODING_JPEG)) {
+    StreamClient client(channel);
+    ASSERT_TRUE(client.open(config));
+    ASSERT_TRUE(client.send(frame_request(1, uav_path(2)[0], 0)));
+    v1::Frame frame;
+    ASSERT_TRUE(client.stream->Read(&frame));
+    EXPECT_FALSE(frame.has_error()) << frame.error().message();
+    EXPECT_FALSE(frame.data().empty());
+    EXPECT_TRUE(client.close().ok());
+}
 
 inline ImageRGB8 decode_png(const std::string& data) {
     png_image image{};
@@ -231,6 +285,12 @@ public:
     int frames() const { return frames_; }
     bool failed() const { return failed_; }
     std::string failure() const { return failure_; }
+    /// At the end of a test: the stream kept receiving frames, without an error; stops it.
+    void expect_kept_going() {
+        EXPECT_TRUE(advances(3)) << "the healthy stream stalled";
+        stop();
+        EXPECT_FALSE(failed()) << failure();
+    }
     /// Waits until at least `more` further frames arrived.
     bool advances(int more, std::chrono::milliseconds timeout = std::chrono::milliseconds(20000)) {
         const int start = frames_;
@@ -274,6 +334,64 @@ private:
     std::atomic<bool> stop_{false}, failed_{false};
     std::atomic<int> frames_{0};
     std::string failure_;
+};
+
+/// One server for all the tests of a suite. `Suite`, the fixture deriving from this, may
+/// define `static server::ServerOptions options()` to start it differently.
+template <typename Suite>
+class SharedServerTest : public ::testing::Test {
+protected:
+    static server::ServerOptions options() { return test_options(); }
+    static void SetUpTestSuite() { server_ = start_server(Suite::options()).release(); }
+    static void TearDownTestSuite() {
+        delete server_;
+        server_ = nullptr;
+    }
+    static inline server::Server* server_ = nullptr;
+};
+
+/// SharedServerTest, with a healthy stream running through each test: it must keep receiving
+/// frames whatever the test does to the server.
+template <typename Suite>
+class HealthyStreamTest : public SharedServerTest<Suite> {
+protected:
+    void SetUp() override {
+        healthy_ = std::make_unique<BackgroundStream>(this->server_->port());
+        ASSERT_TRUE(healthy_->advances(2)) << "the healthy stream does not run";
+    }
+    void TearDown() override { healthy_->expect_kept_going(); }
+    std::unique_ptr<BackgroundStream> healthy_;
+};
+
+/// A server per test whose scene root is a fresh directory of this process (ctest runs a
+/// suite's tests in parallel processes), removed afterwards; SceneService calls on it.
+class SceneRootTest : public ::testing::Test {
+protected:
+    /// Makes base_ (CATGS_TEST_TMP/<name>-<pid>, emptied) and the empty root_ in it.
+    void make_root(const std::string& name) {
+        base_ = std::filesystem::path(CATGS_TEST_TMP) / (name + "-" + std::to_string(getpid()));
+        std::filesystem::remove_all(base_);
+        root_ = base_ / "root";
+        std::filesystem::create_directories(root_);
+    }
+    /// Starts the server on root_.
+    void start(server::ServerOptions o = test_options()) {
+        o.scene_root = root_.string();
+        server_ = start_server(std::move(o));
+        stub_ = v1::SceneService::NewStub(channel_to(server_->port()));
+    }
+    grpc::Status load(const std::string& source, const std::string& id = "", v1::SceneInfo* info = nullptr) {
+        return load_scene_call(*stub_, source, id, info);
+    }
+    void TearDown() override {
+        stub_.reset();
+        server_.reset();
+        std::error_code ec;
+        std::filesystem::remove_all(base_, ec);
+    }
+    std::filesystem::path base_, root_;
+    std::unique_ptr<server::Server> server_;
+    std::unique_ptr<v1::SceneService::Stub> stub_;
 };
 
 }  // namespace catgs::test

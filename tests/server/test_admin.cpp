@@ -15,9 +15,6 @@ namespace catgs::test {
 namespace {
 
 namespace fs = std::filesystem;
-HealthStatus::ServingStatus health(int port, const std::string& service, grpc::Status* status = nullptr) {
-    return test::health(channel_to(port), service, status);
-}
 
 TEST(ServerAdmin, HealthServesEveryService) {
     auto server = start_server();
@@ -134,28 +131,17 @@ TEST(ServerAdmin, ShutdownDrainsOpenStreamsWithUnavailable) {
     EXPECT_EQ(status.error_code(), grpc::StatusCode::UNAVAILABLE) << status.error_message();
 }
 
-class SceneServiceTest : public ::testing::Test {
+class SceneServiceTest : public SceneRootTest {
 protected:
     void SetUp() override {
-        // Per process: ctest runs this suite's tests in parallel processes.
-        root_ = fs::path(CATGS_TEST_TMP) / ("scene-root-" + std::to_string(getpid())) / "root";
-        fs::create_directories(root_);
+        make_root("scene-root");
         // A small scene file under the root, and one outside it.
         Scene small = load_scene("builtin:city?gaussians=10000&seed=3");
         write_ply(small, (root_ / "small.ply").string());
-        write_ply(small, (root_.parent_path() / "outside.ply").string());
+        write_ply(small, (base_ / "outside.ply").string());
         server::ServerOptions o = test_options();
-        o.scene_root = root_.string();
         o.limits.max_scene_bytes = 10 * 1000 * 1000;  // city (4.7 MB) + small (2.4 MB) fit; 20 MB more do not
-        server_ = start_server(o);
-        stub_ = v1::SceneService::NewStub(channel_to(server_->port()));
-    }
-    grpc::Status load(const std::string& source, const std::string& id, v1::SceneInfo* info) {
-        grpc::ClientContext context;
-        v1::LoadSceneRequest request;
-        request.set_source(source);
-        request.set_scene_id(id);
-        return stub_->LoadScene(&context, request, info);
+        start(o);
     }
     grpc::Status get(const std::string& id, v1::SceneInfo* info) {
         grpc::ClientContext context;
@@ -163,15 +149,6 @@ protected:
         request.set_scene_id(id);
         return stub_->GetScene(&context, request, info);
     }
-    void TearDown() override {
-        stub_.reset();
-        server_.reset();
-        std::error_code ec;
-        fs::remove_all(root_.parent_path(), ec);
-    }
-    fs::path root_;
-    std::unique_ptr<server::Server> server_;
-    std::unique_ptr<v1::SceneService::Stub> stub_;
 };
 
 TEST_F(SceneServiceTest, ListGetLoadUnload) {

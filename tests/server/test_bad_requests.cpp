@@ -11,28 +11,16 @@ namespace {
 constexpr double kNaN = std::numeric_limits<double>::quiet_NaN();
 constexpr double kInf = std::numeric_limits<double>::infinity();
 
-class BadRequestTest : public ::testing::Test {
-protected:
-    static void SetUpTestSuite() {
+class BadRequestTest : public HealthyStreamTest<BadRequestTest> {
+public:
+    static server::ServerOptions options() {
         server::ServerOptions o = test_options();
         o.limits.max_width = 1920;
         o.limits.max_height = 1080;
-        server_ = start_server(o).release();
+        return o;
     }
-    static void TearDownTestSuite() {
-        delete server_;
-        server_ = nullptr;
-    }
-    void SetUp() override {
-        healthy_ = std::make_unique<BackgroundStream>(server_->port());
-        ASSERT_TRUE(healthy_->advances(2)) << "the healthy stream does not run";
-    }
-    void TearDown() override {
-        // The healthy stream kept going through whatever the test did.
-        EXPECT_TRUE(healthy_->advances(3)) << "the healthy stream stalled";
-        healthy_->stop();
-        EXPECT_FALSE(healthy_->failed()) << healthy_->failure();
-    }
+
+protected:
 
     /// Opens a stream with `config` and expects it to fail with `code` and `message` in its text.
     static void expect_open_fails(const v1::SessionConfig& config, grpc::StatusCode code, const std::string& message) {
@@ -44,11 +32,7 @@ protected:
         EXPECT_NE(status.error_message().find(message), std::string::npos)
             << "'" << status.error_message() << "' does not contain '" << message << "'";
     }
-
-    static server::Server* server_;
-    std::unique_ptr<BackgroundStream> healthy_;
 };
-server::Server* BadRequestTest::server_ = nullptr;
 
 TEST_F(BadRequestTest, StreamWithoutOpeningMessage) {
     StreamClient client(channel_to(server_->port()));
@@ -199,14 +183,10 @@ TEST_F(BadRequestTest, BadFrameRequestsAnswerThatFrameAndKeepTheSession) {
 }
 
 TEST_F(BadRequestTest, UnaryRenderValidatesToo) {
-    v1::RenderRequest request;
-    *request.mutable_config() = session_config(v1::ENCODING_PNG);
-    *request.mutable_frame() = frame_request(1, uav_path(2)[0], 0);
+    v1::RenderRequest request = render_request(session_config(v1::ENCODING_PNG), frame_request(1, uav_path(2)[0], 0));
     request.mutable_frame()->mutable_pose()->mutable_position()->set_x(kInf);
-    auto stub = v1::RenderService::NewStub(channel_to(server_->port()));
-    grpc::ClientContext context;
     v1::Frame frame;
-    const grpc::Status status = stub->Render(&context, request, &frame);
+    const grpc::Status status = render_once(channel_to(server_->port()), request, &frame);
     EXPECT_EQ(status.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
     EXPECT_NE(status.error_message().find("frame.pose.position: not finite"), std::string::npos) << status.error_message();
 }

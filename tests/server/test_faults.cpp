@@ -20,7 +20,6 @@ namespace catgs::test {
 namespace {
 
 namespace fs = std::filesystem;
-bool serving(int port) { return health(channel_to(port), "") == HealthStatus::SERVING; }
 
 /// The server is healthy and holds nothing of the streams that went before.
 void expect_healthy_and_idle(server::Server& server, int expected_streams = 0) {
@@ -38,14 +37,7 @@ void expect_healthy_and_idle(server::Server& server, int expected_streams = 0) {
         EXPECT_TRUE(eventually([&] { return server.stats().frames_buffered == 0; }));
     }
     // A new stream renders.
-    StreamClient client(channel_to(server.port()));
-    ASSERT_TRUE(client.open(session_config(v1::ENCODING_JPEG)));
-    ASSERT_TRUE(client.send(frame_request(1, uav_path(2)[0], 0)));
-    v1::Frame frame;
-    ASSERT_TRUE(client.stream->Read(&frame));
-    EXPECT_FALSE(frame.has_error()) << frame.error().message();
-    EXPECT_FALSE(frame.data().empty());
-    EXPECT_TRUE(client.close().ok());
+    expect_one_frame(channel_to(server.port()));
 }
 
 // ---------------------------------------------------------------------------------------
@@ -90,22 +82,15 @@ TEST(ServerFaults, SceneUnloadedWhileStreamsUseIt) {
     auto server = start_server(o);
     auto scenes = v1::SceneService::NewStub(channel_to(server->port()));
     auto load = [&](const std::string& id, v1::SceneInfo* info) {
-        grpc::ClientContext context;
-        v1::LoadSceneRequest request;
-        request.set_source("builtin:city?gaussians=10000&seed=5");
-        request.set_scene_id(id);
-        return scenes->LoadScene(&context, request, info);
+        return load_scene_call(*scenes, "builtin:city?gaussians=10000&seed=5", id, info);
     };
     v1::SceneInfo info;
     ASSERT_TRUE(load("doomed", &info).ok());
     auto unary = [&](grpc::Status* status) {
-        v1::RenderRequest request;
-        *request.mutable_config() = session_config(v1::ENCODING_PNG, 0, "doomed");
-        *request.mutable_frame() = frame_request(1, uav_path(2)[0], 0);
-        auto stub = v1::RenderService::NewStub(channel_to(server->port()));
-        grpc::ClientContext context;
         v1::Frame frame;
-        *status = stub->Render(&context, request, &frame);
+        const v1::SessionConfig config = session_config(v1::ENCODING_PNG, 0, "doomed");
+        *status = render_once(channel_to(server->port()), render_request(config, frame_request(1, uav_path(2)[0], 0)),
+                              &frame);
         return frame;
     };
     // A unary render leaves a pooled renderer holding the scene.
@@ -210,14 +195,7 @@ TEST(ServerFaults, SceneLoadBeyondTheMemoryLimit) {
     BackgroundStream healthy(server->port());
     ASSERT_TRUE(healthy.advances(2));
     auto scenes = v1::SceneService::NewStub(channel_to(server->port()));
-    auto load = [&](const std::string& source, const std::string& id) {
-        grpc::ClientContext context;
-        v1::LoadSceneRequest request;
-        request.set_source(source);
-        request.set_scene_id(id);
-        v1::SceneInfo info;
-        return scenes->LoadScene(&context, request, &info);
-    };
+    auto load = [&](const std::string& source, const std::string& id) { return load_scene_call(*scenes, source, id); };
     for (int round = 0; round < 2; ++round) {  // twice: nothing of the first attempt remains
         grpc::Status status = load("medium.ply", "medium");
         EXPECT_EQ(status.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED);
@@ -238,9 +216,7 @@ TEST(ServerFaults, SceneLoadBeyondTheMemoryLimit) {
     // What fits still loads.
     const grpc::Status status = load("builtin:city?gaussians=10000&seed=2", "fits");
     EXPECT_TRUE(status.ok()) << status.error_message();
-    EXPECT_TRUE(healthy.advances(3));
-    healthy.stop();
-    EXPECT_FALSE(healthy.failed()) << healthy.failure();
+    healthy.expect_kept_going();
     expect_healthy_and_idle(*server);
 }
 
@@ -258,13 +234,9 @@ TEST(ServerFaults, DeviceOutOfMemoryWhenASessionLoadsItsScene) {
     ASSERT_EQ(device->used(), 4'720'000u);
     {
         // 40000 Gaussians: 9.4 MB more than the device has left.
-        grpc::ClientContext context;
-        v1::LoadSceneRequest request;
-        request.set_source("builtin:city?gaussians=40000&seed=7");
-        request.set_scene_id("big");
-        v1::SceneInfo info;
         auto scenes = v1::SceneService::NewStub(channel_to(server->port()));
-        ASSERT_TRUE(scenes->LoadScene(&context, request, &info).ok());  // host memory is not limited here
+        // Host memory is not limited here.
+        ASSERT_TRUE(load_scene_call(*scenes, "builtin:city?gaussians=40000&seed=7", "big").ok());
     }
     const std::string expected =
         "out-of-memory: the server cannot hold scene 'big' for another session (CUDA error in cudaMalloc"
@@ -281,33 +253,22 @@ TEST(ServerFaults, DeviceOutOfMemoryWhenASessionLoadsItsScene) {
         EXPECT_EQ(status.error_message(), expected);
     }
     {
-        v1::RenderRequest request;
-        *request.mutable_config() = session_config(v1::ENCODING_PNG, 0, "big");
-        *request.mutable_frame() = frame_request(1, uav_path(2)[0], 0);
-        auto stub = v1::RenderService::NewStub(channel_to(server->port()));
-        grpc::ClientContext context;
         v1::Frame frame;
-        const grpc::Status status = stub->Render(&context, request, &frame);
+        const grpc::Status status = render_once(
+            channel_to(server->port()),
+            render_request(session_config(v1::ENCODING_PNG, 0, "big"), frame_request(1, uav_path(2)[0], 0)), &frame);
         EXPECT_EQ(status.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED) << status.error_message();
         EXPECT_NE(status.error_message().find("out-of-memory: the render failed (CUDA error"), std::string::npos)
             << status.error_message();
     }
     EXPECT_EQ(server->stats().out_of_memory, 4u);
     EXPECT_EQ(device->used(), 4'720'000u);  // nothing of the failed uploads stayed
-    EXPECT_TRUE(healthy.advances(3));
-    healthy.stop();
-    EXPECT_FALSE(healthy.failed()) << healthy.failure();
+    healthy.expect_kept_going();
     expect_healthy_and_idle(*server);
     // Once the device has room (the city's sessions are gone), the scene renders.
     server::SceneSummary city;
     ASSERT_TRUE(eventually([&] { return device->used() == 0; })) << device->used();
-    StreamClient client(channel_to(server->port()));
-    ASSERT_TRUE(client.open(session_config(v1::ENCODING_JPEG, 0, "big")));
-    ASSERT_TRUE(client.send(frame_request(1, uav_path(2)[0], 0)));
-    v1::Frame frame;
-    ASSERT_TRUE(client.stream->Read(&frame));
-    EXPECT_FALSE(frame.has_error()) << frame.error().message();
-    EXPECT_TRUE(client.close().ok());
+    expect_one_frame(channel_to(server->port()), session_config(v1::ENCODING_JPEG, 0, "big"));
 }
 
 // ---------------------------------------------------------------------------------------
@@ -564,9 +525,7 @@ TEST(ServerFaults, MalformedProtobufOnEveryMethod) {
     const grpc::Status unknown = raw_call(channel, "/catgs.v1.RenderService/Explode", {"x"});
     EXPECT_EQ(unknown.error_code(), grpc::StatusCode::UNIMPLEMENTED) << unknown.error_message();
 
-    EXPECT_TRUE(healthy.advances(3));
-    healthy.stop();
-    EXPECT_FALSE(healthy.failed()) << healthy.failure();
+    healthy.expect_kept_going();
     expect_healthy_and_idle(*server);
 }
 
@@ -598,9 +557,7 @@ TEST(ServerFaults, GarbageOnARawConnection) {
         }
         close(fd);
     }
-    EXPECT_TRUE(healthy.advances(3));
-    healthy.stop();
-    EXPECT_FALSE(healthy.failed()) << healthy.failure();
+    healthy.expect_kept_going();
     expect_healthy_and_idle(*server);
 }
 

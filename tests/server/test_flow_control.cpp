@@ -5,26 +5,18 @@
 namespace catgs::test {
 namespace {
 
-class FlowControlTest : public ::testing::Test {
-protected:
-    static void SetUpTestSuite() {
+class FlowControlTest : public HealthyStreamTest<FlowControlTest> {
+public:
+    static server::ServerOptions options() {
         server::ServerOptions o = test_options();
         o.limits.max_width = 640;
         o.limits.max_height = 360;
-        server_ = start_server(o).release();
+        return o;
     }
-    static void TearDownTestSuite() {
-        delete server_;
-        server_ = nullptr;
-    }
-    void SetUp() override {
-        healthy_ = std::make_unique<BackgroundStream>(server_->port());
-        ASSERT_TRUE(healthy_->advances(2)) << "the healthy stream does not run";
-    }
+
+protected:
     void TearDown() override {
-        EXPECT_TRUE(healthy_->advances(3)) << "the healthy stream stalled";
-        healthy_->stop();
-        EXPECT_FALSE(healthy_->failed()) << healthy_->failure();
+        HealthyStreamTest::TearDown();
         // Every stream of the test is gone, with its admission slot and scene lease.
         EXPECT_TRUE(eventually([] { return server_->stats().streams_open == 0; })) << server_->stats().streams_open;
         EXPECT_TRUE(eventually([] { return server_->stats().sessions_active == 0; }));
@@ -36,10 +28,7 @@ protected:
         })) << city.sessions;
         EXPECT_EQ(server_->stats().frames_buffered, 0);
     }
-    static server::Server* server_;
-    std::unique_ptr<BackgroundStream> healthy_;
 };
-server::Server* FlowControlTest::server_ = nullptr;
 
 /// A client that neither reads nor acknowledges gets max_unacked_frames frames; every other
 /// pose is coalesced, and the newest one is what renders when it finally closes.

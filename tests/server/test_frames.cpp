@@ -12,15 +12,8 @@ constexpr int kFrames = 30;
 /// JPEG at quality 90 on these images must stay above this PSNR against the exact render.
 constexpr double kMinJpegPsnr = 35.0;
 
-class FramesTest : public ::testing::Test {
+class FramesTest : public SharedServerTest<FramesTest> {
 protected:
-    static void SetUpTestSuite() { server_ = start_server().release(); }
-    static void TearDownTestSuite() {
-        delete server_;
-        server_ = nullptr;
-    }
-    static server::Server* server_;
-
     /// Streams the path with `config` and checks every frame; `exact` or at least kMinJpegPsnr.
     void stream_and_compare(const v1::SessionConfig& config, bool exact, bool with_hints) {
         const auto path = uav_path(kFrames);
@@ -85,7 +78,6 @@ protected:
         if (setup.options.catgs.cache != CacheMode::off) std::printf("%d of %d frames from the cache\n", cached_frames, kFrames);
     }
 };
-server::Server* FramesTest::server_ = nullptr;
 
 TEST_F(FramesTest, PngFramesAreExactWithTheSpeculativeCacheAndHints) {
     v1::SessionConfig config = session_config(v1::ENCODING_PNG);
@@ -213,13 +205,9 @@ TEST_F(FramesTest, PipelineOptionsMapOntoRenderOptions) {
 
 TEST_F(FramesTest, UnaryRenderMatchesTheReference) {
     const auto path = uav_path(5);
-    v1::RenderRequest request;
-    *request.mutable_config() = session_config(v1::ENCODING_PNG);
-    *request.mutable_frame() = frame_request(7, path[3], 0);
-    auto stub = v1::RenderService::NewStub(channel_to(server_->port()));
-    grpc::ClientContext context;
+    const v1::RenderRequest request = render_request(session_config(v1::ENCODING_PNG), frame_request(7, path[3], 0));
     v1::Frame frame;
-    const grpc::Status status = stub->Render(&context, request, &frame);
+    const grpc::Status status = render_once(channel_to(server_->port()), request, &frame);
     ASSERT_TRUE(status.ok()) << status.error_message();
     EXPECT_EQ(frame.sequence(), 7u);
 

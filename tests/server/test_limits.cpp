@@ -52,9 +52,7 @@ TEST(ServerLimits, RequestsLargerThanTheReceiveLimitAreRefused) {
         EXPECT_EQ(status.error_code(), grpc::StatusCode::INVALID_ARGUMENT) << status.error_message();
         EXPECT_EQ(status.error_message(), "open.client_name: 1000000 bytes; at most 256");
     }
-    EXPECT_TRUE(healthy.advances(3));
-    healthy.stop();
-    EXPECT_FALSE(healthy.failed()) << healthy.failure();
+    healthy.expect_kept_going();
 }
 
 /// Frame requests beyond max_pose_rate are not refused and not lost: the server reads them
@@ -103,15 +101,7 @@ TEST(ServerLimits, SessionMemoryLimit) {
     o.renderer_factory = device->factory();
     o.limits.max_session_bytes = 4'000'000;  // 160x90 needs 1.44 MB, 320x180 5.76 MB
     auto server = start_server(o);
-    {
-        StreamClient client(channel_to(server->port()));
-        ASSERT_TRUE(client.open(session_config(v1::ENCODING_JPEG)));
-        ASSERT_TRUE(client.send(frame_request(1, uav_path(2)[0], 0)));
-        v1::Frame frame;
-        ASSERT_TRUE(client.stream->Read(&frame));
-        EXPECT_FALSE(frame.has_error()) << frame.error().message();
-        EXPECT_TRUE(client.close().ok());
-    }
+    ASSERT_NO_FATAL_FAILURE(expect_one_frame(channel_to(server->port())));
     const std::string expected =
         "max-session-memory: rendering scene 'city' at 320x180 needed 5760000 bytes of renderer memory; this server "
         "allows 4000000 per session; lower the resolution";
@@ -127,15 +117,12 @@ TEST(ServerLimits, SessionMemoryLimit) {
         EXPECT_EQ(status.error_message(), expected);
     }
     {
-        v1::RenderRequest request;
-        *request.mutable_config() = session_config(v1::ENCODING_PNG);
+        v1::RenderRequest request =
+            render_request(session_config(v1::ENCODING_PNG), frame_request(1, uav_path(2, 320, 180)[0], 0));
         request.mutable_config()->set_width(320);
         request.mutable_config()->set_height(180);
-        *request.mutable_frame() = frame_request(1, uav_path(2, 320, 180)[0], 0);
-        auto stub = v1::RenderService::NewStub(channel_to(server->port()));
-        grpc::ClientContext context;
         v1::Frame frame;
-        const grpc::Status status = stub->Render(&context, request, &frame);
+        const grpc::Status status = render_once(channel_to(server->port()), request, &frame);
         EXPECT_EQ(status.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED) << status.error_message();
         EXPECT_EQ(status.error_message(),
                   "max-session-memory: rendering scene 'city' needed 5760000 bytes of renderer memory; this server "
@@ -186,9 +173,7 @@ TEST(ServerLimits, StallWatchdogCancelsAStreamWhoseClientStoppedReading) {
                 status.error_message().c_str());
     EXPECT_TRUE(eventually([&] { return server->stats().streams_open == 1; })) << server->stats().streams_open;
     EXPECT_TRUE(eventually([&] { return server->stats().sessions_active == 1; }));
-    EXPECT_TRUE(healthy.advances(3));
-    healthy.stop();
-    EXPECT_FALSE(healthy.failed()) << healthy.failure();
+    healthy.expect_kept_going();
     EXPECT_EQ(server->stats().streams_stalled, 1u);  // the healthy stream never stalled
 }
 
@@ -196,9 +181,7 @@ TEST(ServerLimits, StallWatchdogCancelsAStreamWhoseClientStoppedReading) {
 TEST(ServerLimits, UnaryRendersReuseRenderers) {
     auto server = start_server();
     auto stub = v1::RenderService::NewStub(channel_to(server->port()));
-    v1::RenderRequest request;
-    *request.mutable_config() = session_config(v1::ENCODING_PNG);
-    *request.mutable_frame() = frame_request(1, uav_path(4)[1], 0);
+    const v1::RenderRequest request = render_request(session_config(v1::ENCODING_PNG), frame_request(1, uav_path(4)[1], 0));
     std::string first;
     for (int i = 0; i < 4; ++i) {
         grpc::ClientContext context;

@@ -153,9 +153,8 @@ TEST_F(TlsTest, TokensOnEveryMethodHealthWithoutToken) {
         results.emplace_back("Stream", one_frame(channel, &got, h.value));
         EXPECT_FALSE(got);
         {
-            v1::RenderRequest request;
-            *request.mutable_config() = session_config(v1::ENCODING_PNG);
-            *request.mutable_frame() = frame_request(1, uav_path(2)[0], 0);
+            const v1::RenderRequest request =
+                render_request(session_config(v1::ENCODING_PNG), frame_request(1, uav_path(2)[0], 0));
             v1::Frame frame;
             auto c = context();
             results.emplace_back("Render", render->Render(c.get(), request, &frame));
@@ -315,12 +314,10 @@ TEST_F(TlsTest, ClientCaWithoutServerCertificateIsABadFlag) {
 
 /// Scene paths: every way out of the root is refused with a message naming the source;
 /// harmless spellings inside it are accepted.
-class ScenePathTest : public ::testing::Test {
+class ScenePathTest : public SceneRootTest {
 protected:
     void SetUp() override {
-        base_ = fs::path(CATGS_TEST_TMP) / ("path-test-" + std::to_string(getpid()));
-        fs::remove_all(base_);
-        root_ = base_ / "root";
+        make_root("path-test");
         fs::create_directories(root_ / "sub");
         fs::create_directories(base_ / "elsewhere");
         Scene small = load_scene("builtin:city?gaussians=10000&seed=4");
@@ -329,28 +326,8 @@ protected:
         fs::create_symlink(base_ / "elsewhere", root_ / "linkdir");                 // a directory out of the root
         fs::create_symlink(base_ / "elsewhere" / "secret.ply", root_ / "out.ply");  // a file out of the root
         fs::create_symlink(root_ / "small.ply", root_ / "sub" / "in.ply");          // a link that stays inside
-        server::ServerOptions o = test_options();
-        o.scene_root = root_.string();
-        server_ = start_server(o);
-        stub_ = v1::SceneService::NewStub(channel_to(server_->port()));
+        start();
     }
-    grpc::Status load(const std::string& source, const std::string& id = "") {
-        grpc::ClientContext context;
-        v1::LoadSceneRequest request;
-        request.set_source(source);
-        request.set_scene_id(id);
-        v1::SceneInfo info;
-        return stub_->LoadScene(&context, request, &info);
-    }
-    void TearDown() override {
-        stub_.reset();
-        server_.reset();
-        std::error_code ec;
-        fs::remove_all(base_, ec);
-    }
-    fs::path base_, root_;
-    std::unique_ptr<server::Server> server_;
-    std::unique_ptr<v1::SceneService::Stub> stub_;
 };
 
 TEST_F(ScenePathTest, WaysOutOfTheRootAreRefused) {
