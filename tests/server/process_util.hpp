@@ -9,6 +9,7 @@
 #include <unistd.h>
 
 #include <chrono>
+#include <condition_variable>
 #include <cstdio>
 #include <memory>
 #include <mutex>
@@ -25,7 +26,9 @@ public:
     /// Starts argv[0] with these arguments; stdout and stderr go to one pipe read by a thread.
     explicit Child(std::vector<std::string> argv) {
         int fds[2];
-        if (pipe(fds) != 0) return;
+        // Close-on-exec: a child started meanwhile by another thread must not keep this pipe
+        // open (its output would then never reach end of file). dup2 below clears the flag.
+        if (pipe2(fds, O_CLOEXEC) != 0) return;
         pid_ = fork();
         if (pid_ == 0) {
             dup2(fds[1], STDOUT_FILENO);
@@ -59,7 +62,9 @@ public:
     void kill(int signal) const {
         if (running()) ::kill(pid_, signal);
     }
-    /// Exit status (WEXITSTATUS, or 128 + signal), or nullopt when it is still running after `timeout`.
+    /// Exit status (WEXITSTATUS, or 128 + signal), or nullopt when it is still running after
+    /// `timeout`. Once it has exited, output() holds everything it wrote (the reader has
+    /// drained the pipe; a process that inherited the pipe and lives on bounds the wait).
     std::optional<int> wait(std::chrono::milliseconds timeout) {
         if (status_) return status_;
         const auto end = std::chrono::steady_clock::now() + timeout;
@@ -68,6 +73,8 @@ public:
             const pid_t r = waitpid(pid_, &w, WNOHANG);
             if (r == pid_) {
                 status_ = WIFEXITED(w) ? WEXITSTATUS(w) : 128 + WTERMSIG(w);
+                std::unique_lock lock(mutex_);
+                drained_.wait_for(lock, std::chrono::seconds(5), [this] { return eof_; });
                 return status_;
             }
             if (std::chrono::steady_clock::now() >= end) return std::nullopt;
@@ -97,12 +104,19 @@ private:
             std::lock_guard lock(mutex_);
             output_.append(buffer, static_cast<std::size_t>(n));
         }
+        {
+            std::lock_guard lock(mutex_);
+            eof_ = true;
+        }
+        drained_.notify_all();
     }
     pid_t pid_ = -1;
     int fd_ = -1;
     std::optional<int> status_;
     std::thread reader_;
     mutable std::mutex mutex_;
+    std::condition_variable drained_;
+    bool eof_ = false;  // the reader saw the end of the pipe
     std::string output_;
 };
 
