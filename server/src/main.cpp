@@ -10,14 +10,16 @@
 #include <iostream>
 #include <thread>
 
+#include "catgs/common/exit_codes.hpp"
+#include "catgs/common/files.hpp"
 #include "catgs/error.hpp"
 #include "catgs/renderer.hpp"
 #include "catgs/server/server.hpp"
 
 namespace {
 
-constexpr int kExitBadInput = 2;
-constexpr int kExitFailure = 1;
+using catgs::kExitBadInput;
+using catgs::kExitFailure;
 constexpr std::uint64_t kMiB = 1024 * 1024;
 
 std::string default_backend() {
@@ -27,16 +29,6 @@ std::string default_backend() {
     } catch (const std::exception&) {
         return "cpu";
     }
-}
-
-std::string read_token(const std::string& path) {
-    std::ifstream in(path);
-    if (!in) throw catgs::Error("--token-file '" + path + "': cannot read the file");
-    std::string token;
-    std::getline(in, token);
-    while (!token.empty() && (token.back() == '\r' || token.back() == ' ')) token.pop_back();
-    if (token.empty()) throw catgs::Error("--token-file '" + path + "': the first line is empty");
-    return token;
 }
 
 }  // namespace
@@ -124,7 +116,7 @@ int main(int argc, char** argv) {
         o.limits.max_session_bytes = max_session_mb * kMiB;
         if (!(o.limits.max_pose_rate >= 0)) throw catgs::Error("--max-pose-rate must be >= 0");
         if (o.limits.stall_timeout_ms < 0) throw catgs::Error("--stall-timeout-ms must be >= 0");
-        if (!token_file.empty()) o.bearer_token = read_token(token_file);
+        if (!token_file.empty()) o.bearer_token = catgs::read_token(token_file);
         o.reflection = !no_reflection;
         if (o.limits.max_sessions < 1) throw catgs::Error("--max-sessions must be >= 1");
         if (o.limits.max_width < 1 || o.limits.max_height < 1) throw catgs::Error("--max-width/--max-height must be >= 1");

@@ -3,6 +3,7 @@
 #include <cmath>
 #include <sstream>
 
+#include "catgs/common/pose_wire.hpp"
 #include "catgs/error.hpp"
 
 namespace catgs::server {
@@ -169,9 +170,7 @@ grpc::Status parse_session_config(const v1::SessionConfig& config, const Limits&
 Camera camera_from_pose(const v1::Pose& pose, const Intrinsics& intrinsics, std::int64_t client_timestamp_us) {
     Camera camera;
     camera.intrinsics = intrinsics;
-    const auto& p = pose.position();
-    const auto& q = pose.orientation();
-    camera.pose = pose_from_quaternion({p.x(), p.y(), p.z()}, {q.w(), q.x(), q.y(), q.z()});
+    camera.pose = wire::from_proto(pose);
     // The planner derives frame intervals from timestamps: use the client's clock, which is
     // what the motion really followed (server receive times add network jitter).
     camera.timestamp = static_cast<double>(client_timestamp_us) * 1e-6;

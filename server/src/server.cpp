@@ -9,6 +9,7 @@
 #include <fstream>
 #include <sstream>
 
+#include "catgs/common/files.hpp"
 #include "catgs/error.hpp"
 #include "catgs/server/net_config.hpp"
 #include "catgs/server/services.hpp"
@@ -16,14 +17,6 @@
 
 namespace catgs::server {
 namespace {
-
-std::string read_file(const std::string& path, const std::string& flag) {
-    std::ifstream in(path, std::ios::binary);
-    if (!in) throw Error(flag + " '" + path + "': cannot read the file");
-    std::ostringstream s;
-    s << in.rdbuf();
-    return s.str();
-}
 
 std::shared_ptr<grpc::ServerCredentials> credentials(const ServerOptions& o) {
     if (o.tls_cert_file.empty() && o.tls_key_file.empty()) {

@@ -19,6 +19,7 @@
 #include <thread>
 #include <vector>
 
+#include "catgs/common/pose_wire.hpp"
 #include "catgs/image.hpp"
 #include "catgs/renderer.hpp"
 #include "catgs/scene_io.hpp"
@@ -78,19 +79,7 @@ inline v1::SessionConfig session_config(v1::Encoding encoding, int quality = 0, 
     return c;
 }
 
-inline v1::Pose pose_of(const Camera& camera) {
-    v1::Pose p;
-    const auto c = camera_centre(camera.pose);
-    const auto q = camera_to_world_quaternion(camera.pose);
-    p.mutable_position()->set_x(c[0]);
-    p.mutable_position()->set_y(c[1]);
-    p.mutable_position()->set_z(c[2]);
-    p.mutable_orientation()->set_w(q[0]);
-    p.mutable_orientation()->set_x(q[1]);
-    p.mutable_orientation()->set_y(q[2]);
-    p.mutable_orientation()->set_z(q[3]);
-    return p;
-}
+inline v1::Pose pose_of(const Camera& camera) { return wire::to_proto(camera.pose); }
 
 /// The shared test scene (generated once per process).
 inline std::shared_ptr<const Scene> test_scene() {
