@@ -6,21 +6,9 @@
 #include <random>
 #include <thread>
 
-namespace catgs::client {
+#include "catgs/common/pose_wire.hpp"
 
-v1::Pose to_pose(const Camera& camera) {
-    v1::Pose p;
-    const auto c = camera_centre(camera.pose);
-    const auto q = camera_to_world_quaternion(camera.pose);
-    p.mutable_position()->set_x(c[0]);
-    p.mutable_position()->set_y(c[1]);
-    p.mutable_position()->set_z(c[2]);
-    p.mutable_orientation()->set_w(q[0]);
-    p.mutable_orientation()->set_x(q[1]);
-    p.mutable_orientation()->set_y(q[2]);
-    p.mutable_orientation()->set_z(q[3]);
-    return p;
-}
+namespace catgs::client {
 
 namespace {
 
@@ -87,7 +75,7 @@ StreamResult run_stream(const std::shared_ptr<grpc::Channel>& channel, const Str
             v1::StreamRequest request;
             v1::FrameRequest* f = request.mutable_frame();
             f->set_sequence(seq);
-            *f->mutable_pose() = to_pose(camera);
+            *f->mutable_pose() = wire::to_proto(camera.pose);
             f->set_client_timestamp_us(micros(when, start));
             f->set_last_received_sequence(last_received);
             const Camera& next = plan.path[(i + 1) % n];
@@ -101,7 +89,7 @@ StreamResult run_stream(const std::shared_ptr<grpc::Channel>& channel, const Str
             for (int k = 1; k <= plan.flight_plan; ++k) {
                 const Camera& future = plan.path[(i + k) % n];
                 auto* planned = f->add_flight_plan();
-                *planned->mutable_pose() = to_pose(future);
+                *planned->mutable_pose() = wire::to_proto(future.pose);
                 const double ahead = plan.rate_hz > 0 ? k * period_s : future.timestamp - camera.timestamp;
                 planned->set_client_timestamp_us(f->client_timestamp_us() + static_cast<std::int64_t>(ahead * 1e6));
             }

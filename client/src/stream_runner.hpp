@@ -85,6 +85,4 @@ StreamResult run_stream_with_retries(const std::shared_ptr<grpc::Channel>& chann
                                      const FrameCallback& on_frame, const std::atomic<bool>& stop,
                                      const RetryPolicy& policy, const std::function<void(const std::string&)>& log);
 
-v1::Pose to_pose(const Camera& camera);
-
 }  // namespace catgs::client
