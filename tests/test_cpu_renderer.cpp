@@ -9,7 +9,9 @@
 #include "catgs/error.hpp"
 #include "catgs/scene_ops.hpp"
 #include "catgs/stages/blend.hpp"
+#include "catgs/stages/footprint.hpp"
 #include "catgs/stages/sh.hpp"
+#include "catgs/stages/tiles.hpp"
 #include "test_util.hpp"
 
 namespace catgs {
@@ -309,7 +311,7 @@ TEST(CpuRendererCompare, FloatAndDoubleSortNearTiesIdentically) {
         }
     scene.update_bounds();
     // Turned 30 degrees about y and moved, so that depth mixes x and z and rounds in float.
-    const double c = std::cos(M_PI / 6), s = std::sin(M_PI / 6);
+    const double c = std::cos(kPi / 6), s = std::sin(kPi / 6);
     Camera camera = test::forward_camera(96, 64, 70.0);
     camera.pose = pose_from_centre({-1.37, 0.21, -0.53}, {c, 0, s, 0, 1, 0, -s, 0, c});
 

@@ -7,6 +7,7 @@
 #include <glm/gtc/quaternion.hpp>
 
 #include "catgs/error.hpp"
+#include "catgs/host_vector.hpp"
 
 namespace catgs {
 namespace {
@@ -19,12 +20,8 @@ constexpr double kDefaultFrameInterval = 1.0 / 30.0;
 constexpr double kGrowMargin = 1.25;
 // Consecutive key frames that must ask for a larger W before it grows.
 constexpr int kGrowVotes = 2;
-
-using V3 = std::array<double, 3>;
-
-double distance(const V3& a, const V3& b) {
-    return std::sqrt((a[0] - b[0]) * (a[0] - b[0]) + (a[1] - b[1]) * (a[1] - b[1]) + (a[2] - b[2]) * (a[2] - b[2]));
-}
+// The speculative near plane never goes below this, so 1/z stays finite.
+constexpr double kMinSpeculativeNear = 1e-3;
 
 glm::dquat to_glm(const std::array<double, 4>& q) { return glm::dquat(q[0], q[1], q[2], q[3]); }
 
@@ -113,7 +110,7 @@ std::vector<Camera> predict_poses(const std::deque<Camera>& history, int count) 
         return out;
     }
     const Camera& before = history[history.size() - 2];
-    const V3 c1 = camera_centre(now.pose), c0 = camera_centre(before.pose);
+    const HostVec3 c1 = camera_centre(now.pose), c0 = camera_centre(before.pose);
     const glm::dquat q1 = to_glm(camera_to_world_quaternion(now.pose));
     const glm::dquat q0 = to_glm(camera_to_world_quaternion(before.pose));
     // World-frame rotation increment per frame, as an angle about an axis.
@@ -123,7 +120,7 @@ std::vector<Camera> predict_poses(const std::deque<Camera>& history, int count) 
     const glm::dvec3 axis = angle > 1e-12 ? glm::axis(step) : glm::dvec3(0, 0, 1);
     for (int k = 1; k <= count; ++k) {
         const glm::dquat qk = glm::angleAxis(angle * k, axis) * q1;
-        const V3 ck{c1[0] + k * (c1[0] - c0[0]), c1[1] + k * (c1[1] - c0[1]), c1[2] + k * (c1[2] - c0[2])};
+        const HostVec3 ck{c1[0] + k * (c1[0] - c0[0]), c1[1] + k * (c1[1] - c0[1]), c1[2] + k * (c1[2] - c0[2])};
         Camera c = now;
         c.pose = pose_from_quaternion(ck, {qk.w, qk.x, qk.y, qk.z});
         c.timestamp = now.timestamp + k * dt;
@@ -157,7 +154,14 @@ FramePlanner::Plan FramePlanner::next(const Camera& actual, const CatgsOptions& 
             window_resorted_ = window_resorted_ || options.resort_cached ||
                                rotation_angle(envelope_.front().pose, actual.pose) > options.reuse_order_max_angle;
             plan.resort = window_resorted_;
-            return plan;
+            if (!plan.resort || emission_order_kept_) return plan;
+            // Re-sorting needs the pairs in emission order, which a key frame that reused the
+            // depth order did not keep: a key frame of the actual pose alone instead.
+            Plan key;
+            key.poses = {actual};
+            key.window = window_;
+            key.keep_emission_order = key.cache(options) != CacheMode::off && options.cached_frames_may_resort();
+            return key;
         }
     }
 
@@ -195,6 +199,7 @@ FramePlanner::Plan FramePlanner::next(const Camera& actual, const CatgsOptions& 
         plan.window = 1;
         return plan;
     }
+    plan.keep_emission_order = options.cached_frames_may_resort();
     if (options.cache == CacheMode::speculative && w > 1) {
         std::vector<Camera> future;
         if (hints && !hints->plan.empty())
@@ -221,12 +226,14 @@ void FramePlanner::key_rendered(const Plan& plan, const KeyFrameSummary& summary
     window_ = plan.window;
     frames_in_window_ = 1;
     window_resorted_ = false;
+    emission_order_kept_ = plan.keep_emission_order;
 }
 
 void FramePlanner::invalidate() {
     envelope_.clear();
     frames_in_window_ = 0;
     window_resorted_ = false;
+    emission_order_kept_ = false;
 }
 
 void FramePlanner::reset() {
@@ -237,9 +244,13 @@ void FramePlanner::reset() {
     frames_in_window_ = 0;
     window_ = 1;
     window_resorted_ = false;
+    emission_order_kept_ = false;
 }
 
-int FramePlanner::window() const { return window_; }
+double FramePlanner::Plan::window_near_plane(const CatgsOptions& options, double near_plane) const {
+    return cache(options) == CacheMode::speculative ? std::max(kMinSpeculativeNear, near_plane - options.guard_translation)
+                                                    : near_plane;
+}
 
 const char* cache_mode_name(CacheMode mode) {
     switch (mode) {

@@ -2,27 +2,17 @@
 
 #include <cmath>
 
+#include "catgs/constants.hpp"
 #include "catgs/error.hpp"
+#include "catgs/host_vector.hpp"
 
 namespace catgs {
-namespace {
-
-using V3 = std::array<double, 3>;
-
-V3 sub(const V3& a, const V3& b) { return {a[0] - b[0], a[1] - b[1], a[2] - b[2]}; }
-V3 cross(const V3& a, const V3& b) {
-    return {a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]};
-}
-double norm(const V3& a) { return std::sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2]); }
-V3 scaled(const V3& a, double s) { return {a[0] * s, a[1] * s, a[2] * s}; }
-
-}  // namespace
 
 Intrinsics intrinsics_from_fov(int width, int height, double fov_x_degrees) {
     Intrinsics k;
     k.width = width;
     k.height = height;
-    k.fx = 0.5 * width / std::tan(0.5 * fov_x_degrees * M_PI / 180.0);
+    k.fx = 0.5 * width / std::tan(0.5 * fov_x_degrees * kPi / 180.0);
     k.fy = k.fx;
     k.cx = 0.5 * width;
     k.cy = 0.5 * height;
@@ -103,17 +93,17 @@ std::array<double, 4> camera_to_world_quaternion(const Pose& p) {
     return {w, x, y, z};
 }
 
-Pose look_at(const V3& eye, const V3& target, const V3& up) {
-    V3 forward = sub(target, eye);
+Pose look_at(const HostVec3& eye, const HostVec3& target, const HostVec3& up) {
+    HostVec3 forward = sub(target, eye);
     double fn = norm(forward);
     if (!(fn > 0) || !std::isfinite(fn)) throw Error("look_at: eye and target coincide or are not finite");
     forward = scaled(forward, 1.0 / fn);
     // Camera +x (right) = forward x up; camera +y (down) = forward x right.
-    V3 right = cross(forward, up);
+    HostVec3 right = cross(forward, up);
     double rn = norm(right);
     if (!(rn > 1e-12)) throw Error("look_at: viewing direction is parallel to the up vector");
     right = scaled(right, 1.0 / rn);
-    V3 down = cross(forward, right);
+    HostVec3 down = cross(forward, right);
     std::array<double, 9> c2w{right[0], down[0], forward[0], right[1], down[1], forward[1],
                               right[2], down[2], forward[2]};
     return pose_from_centre(eye, c2w);

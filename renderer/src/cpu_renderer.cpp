@@ -5,9 +5,7 @@
 #include <cmath>
 #include <limits>
 #include <mutex>
-#include <stdexcept>
 
-#include "catgs/error.hpp"
 #include "catgs/parallel.hpp"
 #include "catgs/stages/blend.hpp"
 #include "catgs/stages/chunks.hpp"
@@ -32,21 +30,9 @@ constexpr int kRadixBits = 8;
 constexpr std::uint32_t kNoSlot = std::numeric_limits<std::uint32_t>::max();
 constexpr std::size_t kTilePixels = static_cast<std::size_t>(kTileSize) * kTileSize;
 
-// The speculative near plane never goes below this, so 1/z stays finite.
-constexpr double kMinSpeculativeNear = 1e-3;
-
 using Clock = std::chrono::steady_clock;
 double elapsed_ms(Clock::time_point since) {
     return std::chrono::duration<double, std::milli>(Clock::now() - since).count();
-}
-
-int bit_width(std::uint64_t v) {
-    int bits = 0;
-    while (v) {
-        ++bits;
-        v >>= 1;
-    }
-    return bits;
 }
 
 }  // namespace
@@ -65,10 +51,7 @@ FrameStats CpuRenderer<T>::render(const Scene& scene, const Camera& camera, cons
     validate(camera.intrinsics, "camera '" + camera.name + "'");
     scene.check_consistent("cpu renderer: scene");
     const View<T> view = make_view<T>(camera, scene.origin, options.near_plane);
-    FramePlanner::Plan plan = planner_.next(camera, options.catgs, hints);
-    // A cached frame that re-sorts needs the pairs in emission order, which a key frame that
-    // reused the depth order did not keep.
-    if (!plan.key && plan.resort && !emitted_kept_) plan = FramePlanner::Plan{true, {camera}, plan.window};
+    const FramePlanner::Plan plan = planner_.next(camera, options.catgs, hints);
     const CacheMode frame_cache = plan.cache(options.catgs);
     FrameStats stats;
     stats.key_frame = plan.key;
@@ -84,19 +67,19 @@ FrameStats CpuRenderer<T>::render(const Scene& scene, const Camera& camera, cons
         const bool speculative = frame_cache == CacheMode::speculative;
         window.guard = speculative ? static_cast<T>(options.catgs.guard_px) : T(0);
         window.guard_translation = speculative ? static_cast<T>(options.catgs.guard_translation) : T(0);
-        const double near = speculative ? std::max(kMinSpeculativeNear, options.near_plane - options.catgs.guard_translation)
-                                        : options.near_plane;
+        const double near = plan.window_near_plane(options.catgs, options.near_plane);
         window.near_plane = static_cast<T>(near);
         for (const Camera& c : plan.poses) window.views.push_back(make_view<T>(c, scene.origin, near));
-        preprocess(scene, view, window, options.culling, options.chunk_culling && options.culling != Culling::exact);
+        chunk_cull(scene, window, options.chunk_culling && options.culling != Culling::exact);
+        stats.stage_ms[Stage::chunk_cull] = elapsed_ms(t);
+        t = Clock::now();
+        preprocess(scene, view, window, options.culling);
         stats.stage_ms[Stage::preprocess] = elapsed_ms(t);
         t = Clock::now();
-        emit_keys(scene, window, options.culling);
-        // Cached frames that re-sort re-key from the pairs in emission (Gaussian) order, so
-        // that their stable sort orders equal depths by index, exactly as a full render does.
-        // With the depth order reused they never read them.
-        emitted_kept_ = frame_cache != CacheMode::off && options.catgs.cached_frames_may_resort();
-        if (emitted_kept_) {
+        keys(scene, window, options.culling);
+        // Cached frames that re-sort re-key from the pairs in emission (Gaussian) order
+        // (rekey); with the depth order reused they never read them.
+        if (plan.keep_emission_order) {
             emitted_keys_ = keys_;
             emitted_values_ = values_;
         } else {
@@ -114,7 +97,7 @@ FrameStats CpuRenderer<T>::render(const Scene& scene, const Camera& camera, cons
         stats.stage_ms[Stage::preprocess] = elapsed_ms(t);
         if (plan.resort) {
             t = Clock::now();
-            rekey_pairs(view, options.culling);
+            rekey(view, options.culling);
             stats.stage_ms[Stage::keys] = elapsed_ms(t);
             sort_and_schedule(view, options, stats);
         }
@@ -141,13 +124,13 @@ FrameStats CpuRenderer<T>::render(const Scene& scene, const Camera& camera, cons
 template <typename T>
 void CpuRenderer<T>::sort_and_schedule(const View<T>& view, const RenderOptions& options, FrameStats& stats) {
     auto t = Clock::now();
-    sort_pairs(view);
+    sort(view);
     stats.stage_ms[Stage::sort] = elapsed_ms(t);
     t = Clock::now();
-    find_tile_ranges(view, options.culling);
+    ranges(view, options.culling);
     stats.stage_ms[Stage::ranges] = elapsed_ms(t);
     t = Clock::now();
-    split_k_ = build_tasks(options.catgs);
+    split_k_ = split(options.catgs);
     stats.stage_ms[Stage::split] = elapsed_ms(t);
 }
 
@@ -163,11 +146,30 @@ std::uint32_t CpuRenderer<T>::project_window(const Scene& scene, std::size_t i, 
     return valid;
 }
 
-// Stage 1: project every Gaussian at the actual pose (for rasterizing) and count the tiles of
-// the union of its footprints over the window (0 = not in any list).
+// The runs of Gaussians to preprocess: the chunks that some pose of the window may see (an
+// unpartitioned scene: all of it, in runs of the same size).
 template <typename T>
-void CpuRenderer<T>::preprocess(const Scene& scene, const View<T>& actual, const Window& window, Culling culling,
-                                bool cull_chunks) {
+void CpuRenderer<T>::chunk_cull(const Scene& scene, const Window& window, bool cull_chunks) {
+    const std::size_t n = scene.count();
+    const int w = static_cast<int>(window.views.size());
+    runs_.clear();
+    chunks_culled_ = 0;
+    if (scene.chunks.empty()) {
+        for (std::size_t b = 0; b < n; b += kChunkGaussians) runs_.push_back({b, std::min<std::size_t>(n, b + kChunkGaussians)});
+    } else {
+        for (const Chunk& c : scene.chunks) {
+            if (!cull_chunks || chunk_in_window(c, window.views.data(), w, window.guard, window.guard_translation))
+                runs_.push_back({c.begin, c.end});
+            else
+                ++chunks_culled_;
+        }
+    }
+}
+
+// Project every Gaussian of the runs at the actual pose (for rasterizing) and count the tiles
+// of the union of its footprints over the window (0 = not in any list).
+template <typename T>
+void CpuRenderer<T>::preprocess(const Scene& scene, const View<T>& actual, const Window& window, Culling culling) {
     const std::size_t n = scene.count();
     const int w = static_cast<int>(window.views.size());
     projected_.resize(n);
@@ -176,26 +178,12 @@ void CpuRenderer<T>::preprocess(const Scene& scene, const View<T>& actual, const
     const std::size_t sh_stride = scene.sh_floats_per_gaussian();
     window_min_depth_ = std::numeric_limits<double>::infinity();
     uncached_bound_px_ = 0;
-    // Stage 0: the runs of Gaussians to preprocess, the chunks that some pose of the window
-    // may see (an unpartitioned scene: all of it, in runs of the same size).
-    std::vector<std::pair<std::size_t, std::size_t>> runs;
-    chunks_culled_ = 0;
-    if (scene.chunks.empty()) {
-        for (std::size_t b = 0; b < n; b += kChunkGaussians) runs.push_back({b, std::min<std::size_t>(n, b + kChunkGaussians)});
-    } else {
-        for (const Chunk& c : scene.chunks) {
-            if (!cull_chunks || chunk_in_window(c, window.views.data(), w, window.guard, window.guard_translation))
-                runs.push_back({c.begin, c.end});
-            else
-                ++chunks_culled_;
-        }
-    }
     std::mutex min_mutex;
-    parallel_for(runs.size(), kGaussianGrain / kChunkGaussians, threads_, [&](std::size_t first_run, std::size_t last_run) {
+    parallel_for(runs_.size(), kGaussianGrain / kChunkGaussians, threads_, [&](std::size_t first_run, std::size_t last_run) {
         Projected<T> poses[kMaxWindow];
         double local_min = std::numeric_limits<double>::infinity(), local_bound = 0;
         for (std::size_t run = first_run; run < last_run; ++run) {
-            for (std::size_t i = runs[run].first; i < runs[run].second; ++i) {
+            for (std::size_t i = runs_[run].first; i < runs_[run].second; ++i) {
                 const std::uint32_t valid = project_window(scene, i, window, poses);
                 tiles_touched_[i] =
                     for_each_window_tile<kMaxWindow>(poses, valid, w, culling, window.guard, window.views[0], [](std::uint32_t) {});
@@ -256,10 +244,10 @@ void CpuRenderer<T>::reproject(const Scene& scene, const View<T>& actual) {
     });
 }
 
-// Stage 2: exclusive scan of the tile counts (64-bit), then emit (tile | depth) keys in
-// Gaussian order through the same predicate the count used.
+// Exclusive scan of the tile counts (64-bit; the scan stage, folded in here), then emit
+// (tile | depth) keys in Gaussian order through the same predicate the count used.
 template <typename T>
-void CpuRenderer<T>::emit_keys(const Scene& scene, const Window& window, Culling culling) {
+void CpuRenderer<T>::keys(const Scene& scene, const Window& window, Culling culling) {
     const std::size_t n = tiles_touched_.size();
     const int w = static_cast<int>(window.views.size());
     offsets_.resize(n);
@@ -293,7 +281,7 @@ void CpuRenderer<T>::emit_keys(const Scene& scene, const Window& window, Culling
 // makes the stable sort order equal depths by Gaussian index. The lists become exactly the
 // per-frame lists, in exact depth order, without preprocessing the scene again.
 template <typename T>
-void CpuRenderer<T>::rekey_pairs(const View<T>& view, Culling culling) {
+void CpuRenderer<T>::rekey(const View<T>& view, Culling culling) {
     const std::uint32_t tiles = static_cast<std::uint32_t>(view.tiles_x) * view.tiles_y;
     keys_.resize(emitted_keys_.size());
     values_ = emitted_values_;
@@ -308,13 +296,13 @@ void CpuRenderer<T>::rekey_pairs(const View<T>& view, Culling culling) {
     });
 }
 
-// Stage 3: stable LSD radix sort over the used key bits only (depth: 32, tile: bit width of
-// the largest tile id), as CUB does on the GPU. Stability keeps Gaussian order for ties.
+// Stable LSD radix sort over the used key bits only (sort_key_tile_bits), as CUB does on the
+// GPU. Stability keeps Gaussian order for ties.
 template <typename T>
-void CpuRenderer<T>::sort_pairs(const View<T>& view) {
+void CpuRenderer<T>::sort(const View<T>& view) {
     const std::size_t n = keys_.size();
-    const int tile_bits = bit_width(static_cast<std::uint64_t>(view.tiles_x) * view.tiles_y);
-    const int passes = (32 + tile_bits + kRadixBits - 1) / kRadixBits;
+    const int tile_bits = sort_key_tile_bits(static_cast<std::uint64_t>(view.tiles_x) * view.tiles_y);
+    const int passes = (kSortKeyDepthBits + tile_bits + kRadixBits - 1) / kRadixBits;
     sort_keys_tmp_.resize(n);
     sort_values_tmp_.resize(n);
     constexpr std::size_t kBuckets = std::size_t{1} << kRadixBits;
@@ -338,10 +326,10 @@ void CpuRenderer<T>::sort_pairs(const View<T>& view) {
     }
 }
 
-// Stage 4: [begin, end) of every tile in the sorted pairs. Exact mode has one list, which
-// every tile shares.
+// [begin, end) of every tile in the sorted pairs. Exact mode has one list, which every tile
+// shares.
 template <typename T>
-void CpuRenderer<T>::find_tile_ranges(const View<T>& view, Culling culling) {
+void CpuRenderer<T>::ranges(const View<T>& view, Culling culling) {
     const std::size_t tiles = static_cast<std::size_t>(view.tiles_x) * view.tiles_y;
     ranges_.assign(tiles, TileRange{});
     const std::size_t n = keys_.size();
@@ -355,18 +343,18 @@ void CpuRenderer<T>::find_tile_ranges(const View<T>& view, Culling culling) {
     rendered_pairs_ = 0;
     for (std::size_t i = 0; i < n; ++i) {
         const std::uint32_t tile = key_tile(keys_[i]);
-        if (tile >= tiles) continue;  // parked by rekey_pairs
+        if (tile >= tiles) continue;  // parked by rekey
         if (i == 0 || key_tile(keys_[i - 1]) != tile) ranges_[tile].begin = i;
         if (i + 1 == n || key_tile(keys_[i + 1]) != tile) ranges_[tile].end = i + 1;
         ++rendered_pairs_;
     }
 }
 
-// Stage 5 (CaT-GS Algorithm 1): one task per tile, then the extra sub-tasks of every tile
-// longer than k appended with their (tile, split index) label; split tiles get partial slots.
-// Returns the k used (0: no splitting).
+// CaT-GS Algorithm 1: one task per tile, then the extra sub-tasks of every tile longer than k
+// appended with their (tile, split index) label; split tiles get partial slots. Returns the k
+// used (0: no splitting).
 template <typename T>
-std::uint32_t CpuRenderer<T>::build_tasks(const CatgsOptions& options) {
+std::uint32_t CpuRenderer<T>::split(const CatgsOptions& options) {
     std::uint32_t k = options.split_k;
     if (options.split_auto) {
         std::uint64_t nonempty = 0, pairs = 0;
@@ -393,7 +381,7 @@ std::uint32_t CpuRenderer<T>::build_tasks(const CatgsOptions& options) {
     return k;
 }
 
-// Stage 6: every task blends its slice of its tile's list from T = 1. A tile that is not
+// Every task blends its slice of its tile's list from T = 1. A tile that is not
 // split writes its pixels; a sub-task of a split tile writes (R, A) to its partial slot.
 template <typename T>
 void CpuRenderer<T>::rasterize(const View<T>& view, const RenderOptions& options, ImageF& out) {
@@ -436,7 +424,7 @@ void CpuRenderer<T>::rasterize(const View<T>& view, const RenderOptions& options
     });
 }
 
-// Stage 7: composite each split tile's sub-tasks front to back.
+// Composite each split tile's sub-tasks front to back.
 template <typename T>
 void CpuRenderer<T>::merge(const View<T>& view, const RenderOptions& options, ImageF& out) {
     const Vec3<T> background{static_cast<T>(options.background[0]), static_cast<T>(options.background[1]),
@@ -468,6 +456,13 @@ void CpuRenderer<T>::merge(const View<T>& view, const RenderOptions& options, Im
     });
 }
 
+template <typename T>
+const Partial<T>* CpuRenderer<T>::partial(std::uint32_t tile, std::uint32_t index) const {
+    if (tile >= split_slot_.size() || split_slot_[tile] == kNoSlot) return nullptr;
+    if (index > split_count(ranges_[tile].end - ranges_[tile].begin, split_k_)) return nullptr;
+    return &partials_[(split_slot_[tile] + index) * kTilePixels];
+}
+
 // What the planner needs to bound screen motion: the nearest cached depth over the window's
 // poses, the mean inverse depth at the key pose, and a bound on the footprints that do not
 // already cover the whole grid (a full-grid footprint cannot gain tiles): the larger of the
@@ -485,16 +480,11 @@ KeyFrameSummary CpuRenderer<T>::summarize(const Scene& scene, const Window& wind
         if (!(p.opacity > 0)) continue;
         ++visible;
         inverse_sum += 1.0 / static_cast<double>(p.depth);
-        // Only a Gaussian already in every list cannot gain tiles (exact culling: the one
-        // shared list). A full-grid rectangle is not enough: opacity-aware lists hold only the
-        // tiles the ellipse touches, e.g. the diagonal ones of a thin diagonal ellipse.
-        if (culling != Culling::exact && tiles_touched_[i] < static_cast<std::uint32_t>(key.tiles_x * key.tiles_y)) {
-            const Vec2<T> e = footprint_extent(p, culling);
+        if (cached_can_gain_tiles(culling, tiles_touched_[i], key)) {
             const float* sc = &scene.scales[3 * i];
-            const T bound = footprint_bound_px(p, culling, static_cast<T>(std::max({sc[0], sc[1], sc[2]})),
-                                               std::max(key.fx, key.fy));
-            s.max_extent_px = std::max({s.max_extent_px, static_cast<double>(e.x), static_cast<double>(e.y),
-                                        static_cast<double>(bound)});
+            const T bound = cached_extent_bound_px(p, culling, static_cast<T>(std::max({sc[0], sc[1], sc[2]})),
+                                                   std::max(key.fx, key.fy));
+            s.max_extent_px = std::max(s.max_extent_px, static_cast<double>(bound));
         }
     }
     s.max_extent_px = std::max(s.max_extent_px, uncached_bound_px_);
@@ -506,41 +496,5 @@ KeyFrameSummary CpuRenderer<T>::summarize(const Scene& scene, const Window& wind
 
 template class CpuRenderer<float>;
 template class CpuRenderer<double>;
-
-Culling parse_culling(const std::string& name) {
-    if (name == "exact") return Culling::exact;
-    if (name == "bbox3sigma") return Culling::bbox3sigma;
-    if (name == "opacity-aware") return Culling::opacity_aware;
-    throw Error("unknown culling mode '" + name + "' (expected exact, bbox3sigma or opacity-aware)");
-}
-
-std::optional<std::uint32_t> parse_split_k(const std::string& text) {
-    try {
-        std::size_t used = 0;
-        const long k = std::stol(text, &used);
-        if (used == text.size() && k >= 1 && k <= static_cast<long>(kMaxSplitK)) return static_cast<std::uint32_t>(k);
-    } catch (const std::logic_error&) {
-    }
-    return std::nullopt;
-}
-
-std::optional<double> parse_degrees(const std::string& text) {
-    try {
-        std::size_t used = 0;
-        const double degrees = std::stod(text, &used);
-        if (used == text.size() && degrees >= 0 && degrees <= 180) return degrees;
-    } catch (const std::logic_error&) {
-    }
-    return std::nullopt;
-}
-
-const char* culling_name(Culling culling) {
-    switch (culling) {
-        case Culling::exact: return "exact";
-        case Culling::bbox3sigma: return "bbox3sigma";
-        case Culling::opacity_aware: return "opacity-aware";
-    }
-    return "?";
-}
 
 }  // namespace catgs

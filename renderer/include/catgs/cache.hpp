@@ -130,18 +130,28 @@ public:
         /// Key frame rendered as with the cache off (no speculation, guard band or kept lists):
         /// the cache is off, or a window would not pay for its key frame (FramePlanner::next).
         bool plain = false;
+        /// Key frame: keep its pairs in emission (Gaussian) order besides the sorted lists, since
+        /// a cached frame of its window may re-sort, and re-sorting re-keys from them so that
+        /// the stable sort orders equal depths by index, as a full render does.
+        bool keep_emission_order = false;
 
         /// The cache mode this frame renders with.
         CacheMode cache(const CatgsOptions& options) const { return plain ? CacheMode::off : options.cache; }
+        /// The near plane the frame's poses are projected with: a speculative window lowers
+        /// `near_plane` by the translation guard (never below 1e-3, so 1/z stays finite), so that a
+        /// pose inside the envelope finds the Gaussians that cross the near plane on the way.
+        double window_near_plane(const CatgsOptions& options, double near_plane) const;
     };
 
+    /// The plan of the frame at `actual`. A cached frame is planned only after key_rendered, and
+    /// only if the backend holds what it needs: one that would re-sort without the key frame's
+    /// pairs in emission order (Plan::keep_emission_order was off) is a key frame instead.
     Plan next(const Camera& actual, const CatgsOptions& options, const FrameHints* hints = nullptr);
     /// Called by the backend after rendering a key frame of `plan`.
     void key_rendered(const Plan& plan, const KeyFrameSummary& summary);
     /// The last frame could not be cached (e.g. rendered in bands): the next is a key frame.
     void invalidate();
     void reset();
-    int window() const;
 
 private:
     /// Radians the camera turns per frame: the reported angular speed, else the last step.
@@ -156,6 +166,8 @@ private:
     // A cached frame of this window re-sorted: the lists no longer hold the key frame's order
     // (re-sorting drops pairs whose footprint left their tile), so the later ones re-sort too.
     bool window_resorted_ = false;
+    // The key frame of this window kept its pairs in emission order (Plan::keep_emission_order).
+    bool emission_order_kept_ = false;
 };
 
 /// Extrapolates `count` poses after the newest camera of `history` at constant linear and

@@ -1,6 +1,6 @@
-// The CPU backend and reference renderer. It runs the same stages as the GPU:
-//   preprocess -> tile keys -> sort -> tile ranges -> split -> rasterize -> merge
-// each a named member with its own buffer, using the host-device math in stages/.
+// The CPU backend and reference renderer. It runs the same stages as the GPU (stage.hpp):
+//   chunk_cull -> preprocess -> keys (scan folded in) -> sort -> ranges -> split -> rasterize -> merge
+// each a member of that name with its own buffer, using the host-device math in stages/.
 // With the CaT-GS cache on, a key frame preprocesses every Gaussian against the window's W
 // poses (the union of its footprints) and the following frames of the window only re-project
 // the cached Gaussians before rasterizing the cached lists (cache.hpp).
@@ -9,7 +9,9 @@
 // depths in a tile keep Gaussian-index order; the result is independent of thread count.
 #pragma once
 
+#include <cstddef>
 #include <cstdint>
+#include <utility>
 #include <vector>
 
 #include "catgs/cache.hpp"
@@ -54,6 +56,11 @@ public:
     const std::vector<std::uint32_t>& sorted_values() const { return values_; }
     const std::vector<TileRange>& tile_ranges() const { return ranges_; }
     const std::vector<TileTask>& tasks() const { return tasks_; }
+    /// Test-only: the (R, A) that sub-task `index` of split tile `tile` left at the tile's
+    /// kTileSize x kTileSize pixels (row-major within the tile; pixels past the image edge are
+    /// unspecified), before merge. nullptr when the tile was not split or index is past its
+    /// last sub-task.
+    const Partial<T>* partial(std::uint32_t tile, std::uint32_t index) const;
 
 private:
     struct Window {
@@ -62,13 +69,14 @@ private:
         T guard_translation = T(0);   // envelope radius in metres (speculation)
         T near_plane = T(0);          // lowered by the translation guard for speculation
     };
-    void preprocess(const Scene& scene, const View<T>& actual, const Window& window, Culling culling, bool cull_chunks);
+    void chunk_cull(const Scene& scene, const Window& window, bool cull_chunks);
+    void preprocess(const Scene& scene, const View<T>& actual, const Window& window, Culling culling);
     void reproject(const Scene& scene, const View<T>& actual);
-    void emit_keys(const Scene& scene, const Window& window, Culling culling);
-    void sort_pairs(const View<T>& view);
-    void rekey_pairs(const View<T>& view, Culling culling);
-    void find_tile_ranges(const View<T>& view, Culling culling);
-    std::uint32_t build_tasks(const CatgsOptions& options);
+    void keys(const Scene& scene, const Window& window, Culling culling);
+    void rekey(const View<T>& view, Culling culling);
+    void sort(const View<T>& view);
+    void ranges(const View<T>& view, Culling culling);
+    std::uint32_t split(const CatgsOptions& options);
     void sort_and_schedule(const View<T>& view, const RenderOptions& options, FrameStats& stats);
     void rasterize(const View<T>& view, const RenderOptions& options, ImageF& out);
     void merge(const View<T>& view, const RenderOptions& options, ImageF& out);
@@ -81,7 +89,8 @@ private:
     int threads_;
     FramePlanner planner_;
     std::uint32_t split_k_ = 0;                   // k of the current task list
-    std::uint64_t chunks_culled_ = 0;             // preprocess: chunks the key frame skipped
+    std::vector<std::pair<std::size_t, std::size_t>> runs_;  // chunk_cull: [begin, end) of Gaussians to preprocess
+    std::uint64_t chunks_culled_ = 0;             // chunk_cull: chunks the key frame skipped
     double window_min_depth_ = 0;                 // preprocess: nearest depth at any pose of the window
     double uncached_bound_px_ = 0;                // preprocess: footprint bound of uncached Gaussians near the image
     std::uint64_t rendered_pairs_ = 0;            // ranges: pairs the tiles' lists hold
@@ -91,9 +100,8 @@ private:
     std::vector<std::uint64_t> offsets_;          // keys: exclusive scan of tiles_touched_
     std::vector<std::uint64_t> keys_;             // keys, then sorted
     std::vector<std::uint32_t> values_;           // Gaussian index per key
-    std::vector<std::uint64_t> emitted_keys_;     // keys: a key frame's pairs in emission order (cache)
+    std::vector<std::uint64_t> emitted_keys_;     // keys: a key frame's pairs in emission order (rekey)
     std::vector<std::uint32_t> emitted_values_;
-    bool emitted_kept_ = false;                   // emitted_keys_/values_ hold the window's pairs
     std::vector<std::uint64_t> sort_keys_tmp_;    // sort: ping-pong buffers
     std::vector<std::uint32_t> sort_values_tmp_;
     std::vector<TileRange> ranges_;               // tile ranges

@@ -64,14 +64,6 @@ CATGS_INLINE Vec3<To> cast(Vec3<From> v) {
     return {static_cast<To>(v.x), static_cast<To>(v.y), static_cast<To>(v.z)};
 }
 
-template <typename To, typename From>
-CATGS_INLINE Mat3<To> cast(const Mat3<From>& a) {
-    Mat3<To> r;
-    for (int i = 0; i < 3; ++i)
-        for (int j = 0; j < 3; ++j) r.m[i][j] = static_cast<To>(a.m[i][j]);
-    return r;
-}
-
 /// Rotation matrix of a unit quaternion (w, x, y, z).
 template <typename T>
 CATGS_INLINE Mat3<T> quat_to_matrix(T w, T x, T y, T z) {

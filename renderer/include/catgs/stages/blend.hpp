@@ -1,4 +1,4 @@
-// Stage 5, the per-pixel blend of graphdeco 3DGS (paper eq. 3): front to back,
+// rasterize, the per-pixel blend of graphdeco 3DGS (paper eq. 3): front to back,
 // C += c * alpha * T, T *= 1 - alpha, with alpha = min(0.99, sigma * exp(-q/2)).
 #pragma once
 

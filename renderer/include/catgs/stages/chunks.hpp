@@ -1,4 +1,4 @@
-// Stage 0, chunk-level culling: a chunk (Scene::chunks, a box of means plus a footprint
+// chunk_cull, chunk-level culling: a chunk (Scene::chunks, a box of means plus a footprint
 // radius) is skipped without touching its Gaussians when no pose of the frame's window can
 // see any of it. The test must never drop a Gaussian that some tile list would hold, so that
 // culling chunks changes nothing in the image; it is conservative in three ways:

@@ -1,4 +1,4 @@
-// Stage 1, preprocess: one Gaussian against one view. Culls, projects the mean, forms the 2D
+// preprocess: one Gaussian against one view. Culls, projects the mean, forms the 2D
 // covariance by the EWA splatting approximation (Zwicker et al. 2002, eqs. 29/31, as in
 // graphdeco 3DGS), inverts it to the conic, and evaluates the SH colour.
 #pragma once

@@ -1,34 +1,20 @@
-// Stage 2, which tiles a projected Gaussian touches. The count pass and the emit pass both
-// call for_each_touched_tile, so they can never disagree (graphdeco's NaN crash,
+// Which tiles a projected Gaussian touches: its tile rectangle, the exact ellipse-tile test,
+// and the one predicate that the count pass and the emit pass both call
+// (for_each_window_tile), so they can never disagree (graphdeco's NaN crash,
 // gaussian-splatting#781, came from count and emit using different predicates).
 #pragma once
 
 #include <cstdint>
-#include <cstring>
 
 #include "catgs/constants.hpp"
 #include "catgs/hd.hpp"
 #include "catgs/math.hpp"
+#include "catgs/stages/culling.hpp"
+#include "catgs/stages/footprint.hpp"
 #include "catgs/stages/project.hpp"
 #include "catgs/stages/view.hpp"
 
 namespace catgs {
-
-enum class Culling : int {
-    /// Every visible Gaussian is evaluated at every pixel: one list serves all tiles.
-    /// The ground truth for tests; cost grows with Gaussians x pixels.
-    exact = 0,
-    /// graphdeco's square of tiles around the 3-sigma circle of the major axis.
-    bbox3sigma = 1,
-    /// The ellipse where sigma * exp(-q/2) reaches 1/255 (FlashGS, gsplat), with an exact
-    /// ellipse-tile test: it drops only pairs whose every pixel has alpha < 1/255.
-    opacity_aware = 2,
-};
-
-/// Relative and absolute slack on the opacity-aware level set, so that rounding in the
-/// rasterizer's alpha can never make a pixel visible that the tile test rejected.
-inline constexpr double kOpacityLevelRelativeSlack = 1e-3;
-inline constexpr double kOpacityLevelAbsoluteSlack = 1e-3;
 
 /// [x0, x1) x [y0, y1) in tiles.
 struct TileRect {
@@ -43,96 +29,6 @@ CATGS_HD int clamped_floor(T v, int lo, int hi) {
     if (!(v > static_cast<T>(lo))) return lo;
     if (!(v < static_cast<T>(hi))) return hi;
     return static_cast<int>(floor_of(v));
-}
-
-/// The squared Mahalanobis level q (conic form) inside which alpha >= 1/255:
-/// sigma * exp(-q/2) >= 1/255  <=>  q <= 2 ln(255 sigma). Negative when sigma < 1/255.
-template <typename T>
-CATGS_HD T opacity_level(T opacity) {
-    const T level = T(2) * log_of(opacity / static_cast<T>(kMinAlpha));
-    return level * static_cast<T>(1.0 + kOpacityLevelRelativeSlack) + static_cast<T>(kOpacityLevelAbsoluteSlack);
-}
-
-/// Half extents (pixels, x and y) of a footprint: graphdeco's 3-sigma radius of the major
-/// axis (both axes) for bbox3sigma, the axis-aligned box of the ellipse q <= level for
-/// opacity-aware culling, negative when the Gaussian cannot reach alpha 1/255 anywhere.
-template <typename T>
-CATGS_HD Vec2<T> footprint_extent(const Projected<T>& g, Culling mode) {
-    if (mode == Culling::bbox3sigma) {
-        const T mid = T(0.5) * (g.cov.x + g.cov.z);
-        const T det = g.cov.x * g.cov.z - g.cov.y * g.cov.y;
-        const T spread = mid * mid - det;
-        const T floor_spread = static_cast<T>(kBBoxEigenFloor);
-        const T lambda = mid + sqrt_of(spread > floor_spread ? spread : floor_spread);
-        const T radius = ceil_of(static_cast<T>(kBBoxSigmas) * sqrt_of(lambda));
-        return {radius, radius};
-    }
-    const T level = opacity_level(g.opacity);
-    if (!(level > T(0))) return {T(-1), T(-1)};
-    // Axis-aligned half extents of the ellipse q <= level: sqrt(level * Sigma'_ii).
-    return {sqrt_of(level * g.cov.x), sqrt_of(level * g.cov.z)};
-}
-
-/// The axis-aligned box [x0, x1] x [y0, y1] (pixels) of the opacity-aware ellipse, slack
-/// included: outside it alpha < 1/255, which blending draws as nothing. A rasterizer may
-/// therefore skip a Gaussian for a whole block of pixels whose centres miss the box, with the
-/// same guarantee as opacity-aware tile culling. Empty when alpha cannot reach 1/255.
-template <typename T>
-struct PixelBox {
-    T x0, y0, x1, y1;
-};
-
-template <typename T>
-CATGS_HD PixelBox<T> visible_box(const Projected<T>& g) {
-    const Vec2<T> e = footprint_extent(g, Culling::opacity_aware);
-    // Empty: a box beyond every pixel centre (3e38 is finite in float and double).
-    if (e.x < T(0)) return {T(3e38), T(3e38), T(-3e38), T(-3e38)};
-    return {g.mean.x - e.x, g.mean.y - e.y, g.mean.x + e.x, g.mean.y + e.y};
-}
-
-/// Do the pixel centres [cx0, cx1] x [cy0, cy1] all miss the box? NaN bounds miss nothing,
-/// so a Gaussian whose extent is not finite is never skipped.
-template <typename T>
-CATGS_HD bool box_misses_centres(const PixelBox<T>& b, T cx0, T cy0, T cx1, T cy1) {
-    return b.x0 > cx1 || b.x1 < cx0 || b.y0 > cy1 || b.y1 < cy0;
-}
-
-/// An upper bound (pixels) on a footprint's half-extent at any pose near the current one: the
-/// Gaussian's largest 3D scale projected at its depth, times the culling mode's sigma
-/// multiple, plus the blur. Unlike the current 2D extent it does not vanish for a needle
-/// seen end-on, whose footprint grows fast as the view turns; the cache envelope uses it.
-template <typename T>
-CATGS_HD T footprint_bound_px(const Projected<T>& g, Culling mode, T max_scale, T focal) {
-    const T level = opacity_level(g.opacity);
-    const T sigmas = mode == Culling::bbox3sigma ? static_cast<T>(kBBoxSigmas) : sqrt_of(level > T(0) ? level : T(0));
-    return sigmas * (focal * max_scale / g.depth + sqrt_of(static_cast<T>(kCovarianceBlur)));
-}
-
-/// Speculative cache: can a Gaussian that is in no list at the key pose `key` (projected there
-/// as `g`) enter the image at a pose the envelope accepts? Such a pose turns the view by at
-/// most `guard` pixels and moves the camera by at most `guard_translation` metres, so the mean
-/// moves by at most guard + f kappa dt / z (first order, inside the Jacobian clamp region) and
-/// the footprint grows by at most b (dt / z + guard / f) towards footprint_bound_px b. When it
-/// can, the planner must bound its motion too: `bound` receives b.
-template <typename T>
-CATGS_HD bool uncached_can_enter(const Projected<T>& g, Culling mode, const View<T>& key, T guard, T guard_translation,
-                                 T max_scale, T& bound) {
-    const T focal = key.fx > key.fy ? key.fx : key.fy;
-    T tangent = key.clamp_left > key.clamp_right ? key.clamp_left : key.clamp_right;
-    tangent = key.clamp_top > tangent ? key.clamp_top : tangent;
-    tangent = key.clamp_bottom > tangent ? key.clamp_bottom : tangent;
-    const T kappa = T(1) + tangent * tangent;
-    const T w = static_cast<T>(key.width), h = static_cast<T>(key.height), z = g.depth;
-    // Beyond the clamp region (the image plus 15% of its size per side) a point is too far
-    // off-axis to come in within the envelope, and first order no longer holds.
-    if (!(g.mean.x >= T(-0.15) * w && g.mean.x <= T(1.15) * w && g.mean.y >= T(-0.15) * h && g.mean.y <= T(1.15) * h))
-        return false;
-    bound = footprint_bound_px(g, mode, max_scale, focal);
-    const T reach = guard * (T(1) + bound / focal) + focal * kappa * guard_translation / z + bound * (T(1) + guard_translation / z);
-    T away = -g.mean.x > g.mean.x - w ? -g.mean.x : g.mean.x - w;
-    away = -g.mean.y > away ? -g.mean.y : away;
-    away = g.mean.y - h > away ? g.mean.y - h : away;
-    return away <= reach;
 }
 
 /// Tile rectangle of a Gaussian under a culling mode (exact mode: the whole grid), with the
@@ -272,37 +168,11 @@ CATGS_HD std::uint32_t for_each_window_tile(const Projected<T>* poses, std::uint
     return n;
 }
 
-/// The first pose set in `valid` (not 0): the pose whose depth orders a Gaussian's keys.
-CATGS_INLINE int first_valid_pose(std::uint32_t valid) {
-    int k = 0;
-    while (!(valid >> k & 1u)) ++k;
-    return k;
-}
-
 /// The single-frame predicate: the tiles one projected Gaussian touches under `mode`.
 template <typename T, typename Emit>
 CATGS_HD std::uint32_t for_each_touched_tile(const Projected<T>& g, Culling mode, const View<T>& view, Emit&& emit,
                                              TileRows rows = {}) {
     return for_each_window_tile<1>(&g, 1u, 1, mode, T(0), view, emit, rows);
 }
-
-/// Sort key: tile id in the high 32 bits, the float bits of the view depth in the low 32.
-/// Depth > near plane > 0, and positive IEEE floats order like their bit patterns.
-CATGS_INLINE std::uint64_t make_sort_key(std::uint32_t tile, float depth) {
-#if defined(__CUDA_ARCH__)
-    const std::uint32_t bits = __float_as_uint(depth);
-#else
-    std::uint32_t bits;
-    static_assert(sizeof(bits) == sizeof(depth));
-    std::memcpy(&bits, &depth, sizeof(bits));
-#endif
-    return (static_cast<std::uint64_t>(tile) << 32) | bits;
-}
-
-CATGS_INLINE std::uint32_t key_tile(std::uint64_t key) { return static_cast<std::uint32_t>(key >> 32); }
-
-/// Cached frames park the pairs the current pose does not need at tile id `tiles`: past every
-/// real tile, so they sort last and no range covers them (bit_width(tiles) sort bits hold it).
-CATGS_INLINE std::uint32_t parked_tile(std::uint32_t tiles) { return tiles; }
 
 }  // namespace catgs

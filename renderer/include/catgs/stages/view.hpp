@@ -10,6 +10,7 @@
 
 #include "catgs/camera.hpp"
 #include "catgs/constants.hpp"
+#include "catgs/hd.hpp"
 #include "catgs/math.hpp"
 
 namespace catgs {
@@ -34,6 +35,35 @@ struct View {
 };
 
 inline int tiles_for(int pixels) { return (pixels + kTileSize - 1) / kTileSize; }
+
+/// The Jacobian clamp region reaches this fraction of the image size past each image edge:
+/// each side's clamp adds (kJacobianClampFactor - 1) = 0.3 of the half-width tangent, i.e.
+/// f * 0.3 * (w / 2f) = 0.15 w pixels. Written out rather than derived, so that the bounds
+/// below are the exact doubles 0.15 and 1.15.
+inline constexpr double kClampRegionMargin = 0.15;
+static_assert(kClampRegionMargin - (kJacobianClampFactor - 1.0) / 2 < 1e-12 &&
+                  (kJacobianClampFactor - 1.0) / 2 - kClampRegionMargin < 1e-12,
+              "the clamp region's margin follows kJacobianClampFactor");
+static_assert(1.0 + kClampRegionMargin == 1.15, "the far bound is the double 1.15");
+
+/// The largest |x/z| or |y/z| of the clamp region: a turn of the view moves an image point
+/// inside it by at most f (1 + tangent^2) pixels per radian.
+template <typename T>
+CATGS_HD T max_clamp_tangent(const View<T>& v) {
+    T tangent = v.clamp_left > v.clamp_right ? v.clamp_left : v.clamp_right;
+    tangent = v.clamp_top > tangent ? v.clamp_top : tangent;
+    tangent = v.clamp_bottom > tangent ? v.clamp_bottom : tangent;
+    return tangent;
+}
+
+/// Is the image point p (pixels) inside the clamp region, the image plus kClampRegionMargin of
+/// its size per side? Beyond it the projection's Jacobian is the clamp's, not the point's.
+template <typename T>
+CATGS_HD bool in_clamp_region(const View<T>& v, Vec2<T> p) {
+    const T w = static_cast<T>(v.width), h = static_cast<T>(v.height);
+    const T lo = static_cast<T>(-kClampRegionMargin), hi = static_cast<T>(1.0 + kClampRegionMargin);
+    return p.x >= lo * w && p.x <= hi * w && p.y >= lo * h && p.y <= hi * h;
+}
 
 /// Builds the View of `camera` for a scene whose positions are relative to `origin`.
 template <typename T>

@@ -1,0 +1,53 @@
+// The sort key of a tile-Gaussian pair: tile id in the high 32 bits, the float bits of the view
+// depth in the low 32, so that one radix sort orders the pairs by tile and then front to back.
+// Both backends emit, park and sort keys through these helpers.
+#pragma once
+
+#include <cstdint>
+#include <cstring>
+
+#include "catgs/hd.hpp"
+
+namespace catgs {
+
+/// The depth half of a key: the float's bits.
+inline constexpr int kSortKeyDepthBits = 32;
+
+/// Depth > near plane > 0, and positive IEEE floats order like their bit patterns.
+CATGS_INLINE std::uint64_t make_sort_key(std::uint32_t tile, float depth) {
+#if defined(__CUDA_ARCH__)
+    const std::uint32_t bits = __float_as_uint(depth);
+#else
+    std::uint32_t bits;
+    static_assert(sizeof(bits) == sizeof(depth));
+    std::memcpy(&bits, &depth, sizeof(bits));
+#endif
+    return (static_cast<std::uint64_t>(tile) << kSortKeyDepthBits) | bits;
+}
+
+CATGS_INLINE std::uint32_t key_tile(std::uint64_t key) { return static_cast<std::uint32_t>(key >> kSortKeyDepthBits); }
+
+/// Cached frames park the pairs the current pose does not need at tile id `tiles`: past every
+/// real tile, so they sort last and no range covers them (sort_key_tile_bits counts it).
+CATGS_INLINE std::uint32_t parked_tile(std::uint32_t tiles) { return tiles; }
+
+/// How many bits the tile half of a key needs on a grid of `tiles` tiles: ids run over
+/// 0..tiles, the parked tile included, so the bit width of `tiles`. A sort need only look at
+/// kSortKeyDepthBits + this many low bits.
+CATGS_HD constexpr int sort_key_tile_bits(std::uint64_t tiles) {
+    int bits = 0;
+    while (tiles) {
+        ++bits;
+        tiles >>= 1;
+    }
+    return bits;
+}
+
+/// The first pose set in `valid` (not 0): the pose whose depth orders a Gaussian's keys.
+CATGS_INLINE int first_valid_pose(std::uint32_t valid) {
+    int k = 0;
+    while (!(valid >> k & 1u)) ++k;
+    return k;
+}
+
+}  // namespace catgs
