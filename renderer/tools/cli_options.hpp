@@ -1,16 +1,15 @@
-// Command-line flags shared by catgs-render and catgs-bench: the pipeline options, parsed the
-// same way in both, so a configuration benchmarked is one that can be rendered.
+// Command-line flags and values shared by catgs-render and catgs-bench: the pipeline options,
+// parsed the same way in both, so a configuration benchmarked is one that can be rendered,
+// and the free-text values the tools parse (--background, --sweep). Library code (catgs_cli),
+// so that the fuzz targets of tests/fuzz call the parsers the tools call.
 #pragma once
 
 #include <CLI/CLI.hpp>
 
-#include <cmath>
-#include <limits>
-#include <sstream>
+#include <array>
 #include <string>
+#include <vector>
 
-#include "catgs/cache.hpp"
-#include "catgs/error.hpp"
 #include "catgs/render_options.hpp"
 
 namespace catgs::cli {
@@ -18,18 +17,7 @@ namespace catgs::cli {
 /// The flags' values, as text where a flag takes words; they start as
 /// default_pipeline_options(), so `--help` shows the defaults every tool and the server share.
 struct PipelineFlags {
-    explicit PipelineFlags(const RenderOptions& o = default_pipeline_options())
-        : culling(culling_name(o.culling)),
-          split(o.catgs.split_auto ? "auto" : o.catgs.split_k > 0 ? std::to_string(o.catgs.split_k) : "off"),
-          split_tail(o.catgs.split_tail_transmittance),
-          cache(cache_mode_name(o.catgs.cache)),
-          window(o.catgs.adaptive_window ? "adaptive" : std::to_string(o.catgs.window)),
-          window_start(o.catgs.window),
-          guard_px(o.catgs.guard_px),
-          guard_m(o.catgs.guard_translation),
-          resort(o.catgs.resort_cached ? "on" : "off"),
-          chunks(o.chunk_culling ? "on" : "off"),
-          reuse_order_max_deg(angle_name(o.catgs.reuse_order_max_angle)) {}
+    explicit PipelineFlags(const RenderOptions& o = default_pipeline_options());
 
     std::string culling, split;
     double split_tail;
@@ -39,108 +27,28 @@ struct PipelineFlags {
     std::string resort, chunks, reuse_order_max_deg;
 
     /// Degrees as the flag shows them; "any" for no limit.
-    static std::string angle_name(double radians) {
-        if (!std::isfinite(radians)) return "any";
-        std::ostringstream out;
-        out << radians * 180.0 / kPi;
-        return out.str();
-    }
+    static std::string angle_name(double radians);
 };
 
-inline void add_pipeline_flags(CLI::App& app, PipelineFlags& f) {
-    app.add_option("--culling", f.culling, "exact, bbox3sigma or opacity-aware")->capture_default_str();
-    app.add_option("--split", f.split, "tile task splitting: off, auto, or k (lists longer than k are split)")
-        ->capture_default_str();
-    app.add_option("--split-tail", f.split_tail,
-                   "early-termination transmittance of split sub-tasks after the first (1e-4 = exact)")
-        ->capture_default_str();
-    app.add_option("--cache", f.cache,
-                   "inter-frame cache: off, speculative (CaT-GS), or unspeculated (shows the artifacts)")
-        ->capture_default_str();
-    app.add_option("--window", f.window, "speculation window W: adaptive, or a fixed 1..16")->capture_default_str();
-    app.add_option("--window-start", f.window_start, "initial W of the adaptive window")->capture_default_str();
-    app.add_option("--guard-px", f.guard_px, "cache guard band: footprint dilation and envelope radius, pixels")
-        ->capture_default_str();
-    app.add_option("--guard-m", f.guard_m, "cache envelope radius in metres")->capture_default_str();
-    app.add_option("--resort", f.resort,
-                   "with the cache: on re-sorts every cached frame by the current depth; off reuses the key frame's "
-                   "depth order while the camera has turned at most --reuse-order-max-deg (faster)")
-        ->capture_default_str();
-    app.add_option("--reuse-order-max-deg", f.reuse_order_max_deg,
-                   "with --resort off: a cached frame reuses the key frame's depth order while it has turned at "
-                   "most this many degrees from the key frame (translation keeps the order), else it re-sorts; "
-                   "'any': always reuse (the paper's cache)")
-        ->capture_default_str();
-    app.add_option("--chunks", f.chunks,
-                   "chunk-level culling: skip the scene's spatial chunks that no pose can see (on or off; exact "
-                   "culling never skips)")
-        ->capture_default_str();
-}
+void add_pipeline_flags(CLI::App& app, PipelineFlags& f);
 
 /// Applies the flags to `options`; throws catgs::Error naming the flag and value.
-inline void apply_pipeline_flags(const PipelineFlags& f, RenderOptions& options) {
-    options.culling = parse_culling(f.culling);
-    CatgsOptions& c = options.catgs;
-    if (f.split == "off") {
-        c.split_k = 0;
-    } else if (f.split == "auto") {
-        c.split_auto = true;
-    } else if (const auto k = parse_split_k(f.split)) {
-        c.split_k = *k;
-    } else {
-        throw Error("--split '" + f.split + "': expected off, auto or an integer k in 1..16777216");
-    }
-    if (!(f.split_tail >= kMinTransmittance && f.split_tail < 1.0))
-        throw Error("--split-tail " + std::to_string(f.split_tail) + ": expected a transmittance in [1e-4, 1)");
-    c.split_tail_transmittance = f.split_tail;
-    c.cache = parse_cache_mode(f.cache);
-    if (f.window == "adaptive") {
-        c.adaptive_window = true;
-        c.window = f.window_start;
-    } else {
-        try {
-            std::size_t used = 0;
-            const int w = std::stoi(f.window, &used);
-            if (used != f.window.size() || w < 1 || w > kMaxWindow) throw std::invalid_argument(f.window);
-            c.adaptive_window = false;
-            c.window = w;
-        } catch (const std::logic_error&) {
-            throw Error("--window '" + f.window + "': expected adaptive or an integer in 1..16");
-        }
-    }
-    if (f.window_start < 1 || f.window_start > kMaxWindow)
-        throw Error("--window-start " + std::to_string(f.window_start) + ": expected 1..16");
-    if (!(f.guard_px >= 0 && f.guard_px <= 64)) throw Error("--guard-px: expected 0..64 pixels");
-    if (!(f.guard_m >= 0 && f.guard_m <= 100)) throw Error("--guard-m: expected 0..100 metres");
-    c.guard_px = f.guard_px;
-    c.guard_translation = f.guard_m;
-    if (f.resort != "on" && f.resort != "off") throw Error("--resort '" + f.resort + "': expected on or off");
-    c.resort_cached = f.resort == "on";
-    if (f.reuse_order_max_deg == "any") {
-        c.reuse_order_max_angle = std::numeric_limits<double>::infinity();
-    } else if (const auto degrees = parse_degrees(f.reuse_order_max_deg)) {
-        c.reuse_order_max_angle = *degrees * kPi / 180.0;
-    } else {
-        throw Error("--reuse-order-max-deg '" + f.reuse_order_max_deg + "': expected 'any' or degrees in 0..180");
-    }
-    if (f.chunks != "on" && f.chunks != "off") throw Error("--chunks '" + f.chunks + "': expected on or off");
-    options.chunk_culling = f.chunks == "on";
-}
+void apply_pipeline_flags(const PipelineFlags& f, RenderOptions& options);
 
 /// A short description of the pipeline options for logs and benchmark tables.
-inline std::string describe_pipeline(const RenderOptions& o) {
-    std::string s = culling_name(o.culling);
-    const CatgsOptions& c = o.catgs;
-    s += c.split_auto ? ", split auto" : (c.split_k ? ", split k=" + std::to_string(c.split_k) : ", no split");
-    s += std::string(", cache ") + cache_mode_name(c.cache);
-    if (c.cache != CacheMode::off)
-        s += c.adaptive_window ? ", W adaptive" : ", W=" + std::to_string(c.window);
-    if (c.cache != CacheMode::off && !c.resort_cached)
-        s += std::isfinite(c.reuse_order_max_angle)
-                 ? ", depth order reused within " + PipelineFlags::angle_name(c.reuse_order_max_angle) + " deg"
-                 : ", depth order reused";
-    if (!o.chunk_culling) s += ", no chunk culling";
-    return s;
-}
+std::string describe_pipeline(const RenderOptions& o);
+
+/// catgs-render's --background "r,g,b", each in [0, 1]; throws catgs::Error naming the flag.
+std::array<float, 3> parse_background(const std::string& text);
+
+/// One configuration of catgs-bench's --sweep.
+struct SweepEntry {
+    std::string name;
+    RenderOptions options = default_pipeline_options();
+};
+
+/// Parses "name: flags; name: flags" (or one "name: flags" per line of @file) into entries,
+/// each entry's flags applied over the defaults; throws catgs::Error naming the entry.
+std::vector<SweepEntry> parse_sweep(std::string text);
 
 }  // namespace catgs::cli

@@ -1,19 +1,18 @@
-// libFuzzer target: catgs-bench's --sweep parser (parse_sweep in
-// renderer/tools/catgs_bench.cpp: "name: flags; name: flags", or @FILE with one entry per
-// line), each entry's flags parsed by CLI11 and applied by cli::apply_pipeline_flags.
-// parse_sweep is file-local, so the tool's source is compiled in here with main() renamed.
-// An input with a newline is passed as the contents of an @FILE (where lines are entries),
-// any other as the flag's text. Inputs of more than kMaxEntries entries are skipped: each
-// entry builds a CLI11 parser, which dominates the cost of a run.
+// libFuzzer target: catgs-bench's --sweep parser (cli::parse_sweep: "name: flags; name: flags",
+// or @FILE with one entry per line), each entry's flags parsed by CLI11 and applied by
+// cli::apply_pipeline_flags. An input with a newline is passed as the contents of an @FILE
+// (where lines are entries), any other as the flag's text. Inputs of more than kMaxEntries
+// entries are skipped: each entry builds a CLI11 parser, which dominates the cost of a run.
 
+#include <algorithm>
 #include <cstddef>
 #include <cstdint>
 #include <string>
+#include <vector>
 
-#define main catgs_bench_main
-#include "../../renderer/tools/catgs_bench.cpp"
-#undef main
-
+#include "catgs/error.hpp"
+#include "catgs/render_options.hpp"
+#include "cli_options.hpp"
 #include "fuzz_util.hpp"
 
 namespace {
@@ -22,9 +21,9 @@ constexpr std::size_t kMaxEntries = 4;
 
 void check(const std::string& text) {
     try {
-        const std::vector<Config> configs = parse_sweep(text);
+        const std::vector<catgs::cli::SweepEntry> configs = catgs::cli::parse_sweep(text);
         catgs::fuzz::require(!configs.empty(), "an empty sweep accepted");
-        for (const Config& c : configs) {
+        for (const catgs::cli::SweepEntry& c : configs) {
             const catgs::CatgsOptions& o = c.options.catgs;
             catgs::fuzz::require(o.window >= 1 && o.window <= catgs::kMaxWindow, "window outside 1..16 accepted");
             catgs::fuzz::require(o.split_k <= (1u << 24), "split k above 2^24 accepted");

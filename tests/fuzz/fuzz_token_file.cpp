@@ -1,15 +1,12 @@
-// libFuzzer target: catgs-server's --token-file reader (read_token in server/src/main.cpp, the
-// bearer token's first line) on arbitrary file contents. read_token is file-local to
-// main.cpp, so main.cpp is compiled into this target with its main() renamed.
+// libFuzzer target: the --token-file reader of catgs-server (catgs::read_token, the bearer
+// token's first line) on arbitrary file contents.
 
 #include <cstddef>
 #include <cstdint>
 #include <string>
 
-#define main catgs_server_main
-#include "../../server/src/main.cpp"
-#undef main
-
+#include "catgs/common/files.hpp"
+#include "catgs/error.hpp"
 #include "fuzz_util.hpp"
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
@@ -18,7 +15,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     const std::string& path = file.write(data, size);
     using catgs::fuzz::require;
     try {
-        const std::string token = read_token(path);
+        const std::string token = catgs::read_token(path);
         require(!token.empty(), "empty token accepted");
         require(token.find('\n') == std::string::npos, "token spans lines");
         require(token.back() != ' ' && token.back() != '\r', "token keeps trailing blanks");

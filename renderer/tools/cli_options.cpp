@@ -1,0 +1,188 @@
+#include "cli_options.hpp"
+
+#include <algorithm>
+#include <cctype>
+#include <cmath>
+#include <fstream>
+#include <limits>
+#include <sstream>
+#include <stdexcept>
+
+#include "catgs/cache.hpp"
+#include "catgs/error.hpp"
+
+namespace catgs::cli {
+
+PipelineFlags::PipelineFlags(const RenderOptions& o)
+    : culling(culling_name(o.culling)),
+      split(o.catgs.split_auto ? "auto" : o.catgs.split_k > 0 ? std::to_string(o.catgs.split_k) : "off"),
+      split_tail(o.catgs.split_tail_transmittance),
+      cache(cache_mode_name(o.catgs.cache)),
+      window(o.catgs.adaptive_window ? "adaptive" : std::to_string(o.catgs.window)),
+      window_start(o.catgs.window),
+      guard_px(o.catgs.guard_px),
+      guard_m(o.catgs.guard_translation),
+      resort(o.catgs.resort_cached ? "on" : "off"),
+      chunks(o.chunk_culling ? "on" : "off"),
+      reuse_order_max_deg(angle_name(o.catgs.reuse_order_max_angle)) {}
+
+std::string PipelineFlags::angle_name(double radians) {
+    if (!std::isfinite(radians)) return "any";
+    std::ostringstream out;
+    out << radians * 180.0 / kPi;
+    return out.str();
+}
+
+void add_pipeline_flags(CLI::App& app, PipelineFlags& f) {
+    app.add_option("--culling", f.culling, "exact, bbox3sigma or opacity-aware")->capture_default_str();
+    app.add_option("--split", f.split, "tile task splitting: off, auto, or k (lists longer than k are split)")
+        ->capture_default_str();
+    app.add_option("--split-tail", f.split_tail,
+                   "early-termination transmittance of split sub-tasks after the first (1e-4 = exact)")
+        ->capture_default_str();
+    app.add_option("--cache", f.cache,
+                   "inter-frame cache: off, speculative (CaT-GS), or unspeculated (shows the artifacts)")
+        ->capture_default_str();
+    app.add_option("--window", f.window, "speculation window W: adaptive, or a fixed 1..16")->capture_default_str();
+    app.add_option("--window-start", f.window_start, "initial W of the adaptive window")->capture_default_str();
+    app.add_option("--guard-px", f.guard_px, "cache guard band: footprint dilation and envelope radius, pixels")
+        ->capture_default_str();
+    app.add_option("--guard-m", f.guard_m, "cache envelope radius in metres")->capture_default_str();
+    app.add_option("--resort", f.resort,
+                   "with the cache: on re-sorts every cached frame by the current depth; off reuses the key frame's "
+                   "depth order while the camera has turned at most --reuse-order-max-deg (faster)")
+        ->capture_default_str();
+    app.add_option("--reuse-order-max-deg", f.reuse_order_max_deg,
+                   "with --resort off: a cached frame reuses the key frame's depth order while it has turned at "
+                   "most this many degrees from the key frame (translation keeps the order), else it re-sorts; "
+                   "'any': always reuse (the paper's cache)")
+        ->capture_default_str();
+    app.add_option("--chunks", f.chunks,
+                   "chunk-level culling: skip the scene's spatial chunks that no pose can see (on or off; exact "
+                   "culling never skips)")
+        ->capture_default_str();
+}
+
+void apply_pipeline_flags(const PipelineFlags& f, RenderOptions& options) {
+    options.culling = parse_culling(f.culling);
+    CatgsOptions& c = options.catgs;
+    if (f.split == "off") {
+        c.split_k = 0;
+    } else if (f.split == "auto") {
+        c.split_auto = true;
+    } else if (const auto k = parse_split_k(f.split)) {
+        c.split_k = *k;
+    } else {
+        throw Error("--split '" + f.split + "': expected off, auto or an integer k in 1..16777216");
+    }
+    if (!(f.split_tail >= kMinTransmittance && f.split_tail < 1.0))
+        throw Error("--split-tail " + std::to_string(f.split_tail) + ": expected a transmittance in [1e-4, 1)");
+    c.split_tail_transmittance = f.split_tail;
+    c.cache = parse_cache_mode(f.cache);
+    if (f.window == "adaptive") {
+        c.adaptive_window = true;
+        c.window = f.window_start;
+    } else {
+        try {
+            std::size_t used = 0;
+            const int w = std::stoi(f.window, &used);
+            if (used != f.window.size() || w < 1 || w > kMaxWindow) throw std::invalid_argument(f.window);
+            c.adaptive_window = false;
+            c.window = w;
+        } catch (const std::logic_error&) {
+            throw Error("--window '" + f.window + "': expected adaptive or an integer in 1..16");
+        }
+    }
+    if (f.window_start < 1 || f.window_start > kMaxWindow)
+        throw Error("--window-start " + std::to_string(f.window_start) + ": expected 1..16");
+    if (!(f.guard_px >= 0 && f.guard_px <= 64)) throw Error("--guard-px: expected 0..64 pixels");
+    if (!(f.guard_m >= 0 && f.guard_m <= 100)) throw Error("--guard-m: expected 0..100 metres");
+    c.guard_px = f.guard_px;
+    c.guard_translation = f.guard_m;
+    if (f.resort != "on" && f.resort != "off") throw Error("--resort '" + f.resort + "': expected on or off");
+    c.resort_cached = f.resort == "on";
+    if (f.reuse_order_max_deg == "any") {
+        c.reuse_order_max_angle = std::numeric_limits<double>::infinity();
+    } else if (const auto degrees = parse_degrees(f.reuse_order_max_deg)) {
+        c.reuse_order_max_angle = *degrees * kPi / 180.0;
+    } else {
+        throw Error("--reuse-order-max-deg '" + f.reuse_order_max_deg + "': expected 'any' or degrees in 0..180");
+    }
+    if (f.chunks != "on" && f.chunks != "off") throw Error("--chunks '" + f.chunks + "': expected on or off");
+    options.chunk_culling = f.chunks == "on";
+}
+
+std::string describe_pipeline(const RenderOptions& o) {
+    std::string s = culling_name(o.culling);
+    const CatgsOptions& c = o.catgs;
+    s += c.split_auto ? ", split auto" : (c.split_k ? ", split k=" + std::to_string(c.split_k) : ", no split");
+    s += std::string(", cache ") + cache_mode_name(c.cache);
+    if (c.cache != CacheMode::off)
+        s += c.adaptive_window ? ", W adaptive" : ", W=" + std::to_string(c.window);
+    if (c.cache != CacheMode::off && !c.resort_cached)
+        s += std::isfinite(c.reuse_order_max_angle)
+                 ? ", depth order reused within " + PipelineFlags::angle_name(c.reuse_order_max_angle) + " deg"
+                 : ", depth order reused";
+    if (!o.chunk_culling) s += ", no chunk culling";
+    return s;
+}
+
+std::array<float, 3> parse_background(const std::string& text) {
+    std::array<float, 3> rgb{};
+    std::stringstream in(text);
+    std::string part;
+    int i = 0;
+    while (std::getline(in, part, ',')) {
+        if (i >= 3) throw Error("--background '" + text + "': expected three numbers r,g,b");
+        try {
+            std::size_t used = 0;
+            rgb[i] = std::stof(part, &used);
+            if (used != part.size()) throw std::invalid_argument(part);
+        } catch (const std::exception&) {
+            throw Error("--background '" + text + "': '" + part + "' is not a number");
+        }
+        if (!(rgb[i] >= 0.0f && rgb[i] <= 1.0f))
+            throw Error("--background '" + text + "': each component must be in [0, 1]");
+        ++i;
+    }
+    if (i != 3) throw Error("--background '" + text + "': expected three numbers r,g,b");
+    return rgb;
+}
+
+std::vector<SweepEntry> parse_sweep(std::string text) {
+    if (!text.empty() && text[0] == '@') {
+        std::ifstream in(text.substr(1));
+        if (!in) throw Error("--sweep '" + text + "': cannot open the file");
+        std::stringstream all;
+        all << in.rdbuf();
+        text = all.str();
+        std::replace(text.begin(), text.end(), '\n', ';');
+    }
+    std::vector<SweepEntry> configs;
+    std::stringstream in(text);
+    std::string entry;
+    while (std::getline(in, entry, ';')) {
+        const auto first = entry.find_first_not_of(" \t\r\n");
+        if (first == std::string::npos || entry[first] == '#') continue;
+        const auto colon = entry.find(':');
+        if (colon == std::string::npos)
+            throw Error("--sweep entry '" + entry + "': expected 'name: flags'");
+        SweepEntry c;
+        c.name = entry.substr(first, colon - first);
+        while (!c.name.empty() && std::isspace(static_cast<unsigned char>(c.name.back()))) c.name.pop_back();
+        CLI::App app;
+        PipelineFlags flags;
+        add_pipeline_flags(app, flags);
+        try {
+            app.parse(entry.substr(colon + 1), false);
+        } catch (const CLI::ParseError& e) {
+            throw Error("--sweep entry '" + c.name + "': " + e.what());
+        }
+        apply_pipeline_flags(flags, c.options);
+        configs.push_back(c);
+    }
+    if (configs.empty()) throw Error("--sweep '" + text + "': no configurations");
+    return configs;
+}
+
+}  // namespace catgs::cli
