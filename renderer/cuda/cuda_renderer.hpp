@@ -1,9 +1,10 @@
 // The CUDA backend: the same stages as the CPU reference (stages/*.hpp are shared), on one
 // explicit stream per renderer instance, with grow-only device arenas.
 //
+//   chunk_cull  the chunks some pose of a key frame's window may see, compacted (CUB select)
 //   preprocess  one thread per Gaussian: cull, project, conic, SH colour, tile count
 //   scan        CUB exclusive sum of the 64-bit tile counts (the total read back once)
-//   emit        one thread per Gaussian writes (tile | depth) keys at its offset
+//   keys        one thread per Gaussian writes (tile | depth) keys at its offset
 //   sort        CUB radix sort over the used key bits only (32 + bits of the tile count)
 //   ranges      per tile [begin, end) in the sorted list
 //   split       CaT-GS Algorithm 1: extra sub-tasks of long lists through an atomic task
@@ -11,23 +12,29 @@
 //   rasterize   one 256-thread block per task (16x16 tile or sub-task), batches of Gaussians
 //               in shared memory; sub-tasks write partial (R, A)
 //   merge       composites the sub-tasks of each split tile front to back
-//   copy-out    RGB8 (quantised on the device) and/or float RGB to the host
+//   copy_out    RGB8 (quantised on the device) and/or float RGB to the host
+// Each stage is one file (<stage>.cu) with its kernels and a launcher of the same name.
 // A key frame of the CaT-GS cache preprocesses against the window's W poses; cached frames
 // re-project the cached Gaussians, re-key and re-sort the cached pairs, and rasterize.
 //
 // When a frame's pairs exceed the pair budget, it is rendered in horizontal bands of tile
-// rows, each with its own count, emit, sort and rasterize; a single tile row over budget is
+// rows, each with its own count, keys, sort and rasterize; a single tile row over budget is
 // an error (catgs::Error), never an out-of-bounds write.
 #pragma once
 
 #include <cstdint>
 #include <memory>
+#include <string>
+#include <vector>
 
 #include "catgs/cache.hpp"
 #include "catgs/camera.hpp"
+#include "catgs/cpu_renderer.hpp"
 #include "catgs/image.hpp"
 #include "catgs/render_options.hpp"
 #include "catgs/scene.hpp"
+#include "catgs/stages/split.hpp"
+#include "device_scene.hpp"
 
 typedef struct CUstream_st* cudaStream_t;
 
@@ -36,50 +43,41 @@ namespace catgs::cuda {
 /// True when a CUDA device is present and usable (tests skip otherwise).
 bool device_available(std::string* reason = nullptr);
 
-/// A scene uploaded to the current device once, shareable by several renderers.
-class DeviceScene {
-public:
-    explicit DeviceScene(const Scene& scene, cudaStream_t stream = nullptr);
-    ~DeviceScene();
-    DeviceScene(const DeviceScene&) = delete;
-    DeviceScene& operator=(const DeviceScene&) = delete;
-
-    std::size_t count() const { return count_; }
-    std::size_t bytes() const { return bytes_; }
-    int sh_degree() const { return sh_degree_; }
-    const std::array<double, 3>& origin() const { return origin_; }
-
-    const float* positions() const { return positions_; }
-    const float* scales() const { return scales_; }
-    const float* rotations() const { return rotations_; }
-    const float* opacities() const { return opacities_; }
-    const float* sh() const { return sh_; }
-
-    /// The scene's chunks (an unpartitioned scene gets runs of kChunkGaussians that are never
-    /// culled), and the list 0..chunk_count()-1 for frames that cull none.
-    const Chunk* chunks() const { return chunks_; }
-    const std::uint32_t* all_chunks() const { return all_chunks_; }
-    std::uint32_t chunk_count() const { return chunk_count_; }
-    /// Whether the chunks came from the scene (Scene::chunks) and carry real bounds.
-    bool partitioned() const { return partitioned_; }
-
-private:
-    void free_all();
-
-    std::size_t count_ = 0, bytes_ = 0;
-    int sh_degree_ = 0;
-    std::array<double, 3> origin_{};
-    float *positions_ = nullptr, *scales_ = nullptr, *rotations_ = nullptr, *opacities_ = nullptr, *sh_ = nullptr;
-    Chunk* chunks_ = nullptr;
-    std::uint32_t* all_chunks_ = nullptr;
-    std::uint32_t chunk_count_ = 0;
-    bool partitioned_ = false;
-};
-
 struct CudaLimits {
     /// Most tile-Gaussian pairs one pass may hold; 0 = derive from free device memory at
     /// the first frame (a quarter of what is free, at 24 bytes a pair plus sort space).
     std::uint64_t max_pairs = 0;
+};
+
+/// Host copies of the last frame's stage outputs, laid out as CpuRenderer's accessors are (partials
+/// through partial()), for the tests that compare the backends stage by stage.
+template <typename T>
+struct StageReadback {
+    std::vector<std::uint64_t> sorted_keys;    ///< sort: the frame's pairs, by key
+    std::vector<std::uint32_t> sorted_values;  ///< sort: the Gaussian of each key
+    /// ranges: [begin, end) per tile; exact culling has one list, [0, pairs) for every tile.
+    std::vector<TileRange> tile_ranges;
+    /// split: every tile, then the extra sub-tasks by (tile, index). The device appends them in
+    /// the order its atomics hand out; the rasterizer does not depend on it, so they are sorted.
+    std::vector<TileTask> tasks;
+    std::uint32_t split_k = 0;  ///< split: the k of the task list (0: not split)
+    /// split: each tile's first partial slot (in the order the device's atomics handed them
+    /// out), or kNoPartials when the tile is not split.
+    std::vector<std::uint32_t> split_slot;
+    /// rasterize: the (R, A) of the split sub-tasks, kTileSize x kTileSize pixels a slot.
+    std::vector<Partial<T>> partials;
+
+    static constexpr std::uint32_t kNoPartials = 0xffffffffu;
+
+    /// Like CpuRenderer::partial: the (R, A) that sub-task `index` of split tile `tile` left at
+    /// the tile's pixels (row-major within the tile; pixels past the image edge are never
+    /// written), or nullptr when the tile was not split or index is past its last sub-task.
+    const Partial<T>* partial(std::uint32_t tile, std::uint32_t index) const {
+        if (tile >= split_slot.size() || split_slot[tile] == kNoPartials) return nullptr;
+        const TileRange& r = tile_ranges[tile];
+        if (index > split_count(r.end - r.begin, split_k)) return nullptr;
+        return &partials[(static_cast<std::size_t>(split_slot[tile]) + index) * kTileSize * kTileSize];
+    }
 };
 
 template <typename T>
@@ -104,6 +102,11 @@ public:
     void reset_cache();
 
     cudaStream_t stream() const;
+
+    /// Test-only: copies the last frame's stage outputs to the host (synchronises the stream).
+    /// Throws catgs::Error when there was no frame, or when it was rendered in bands (the
+    /// device then holds only the last band's lists).
+    StageReadback<T> read_back_stages();
 
 private:
     struct Impl;

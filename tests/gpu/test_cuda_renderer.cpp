@@ -10,6 +10,7 @@
 #include "catgs/cpu_renderer.hpp"
 #include "catgs/error.hpp"
 #include "catgs/scene_io.hpp"
+#include "catgs/stage.hpp"
 #include "catgs/trajectory.hpp"
 #include "cuda_renderer.hpp"
 
@@ -179,6 +180,21 @@ TEST_F(CudaRendererTest, DeterministicAndSafeWithSeveralInstances) {
         });
     for (auto& t : threads) t.join();
     for (const auto& r : results) EXPECT_EQ(r.rgb, reference.rgb);
+}
+
+// Every stage that launches work on a plain frame is timed by its own pair of events; the
+// frame's time is their sum, and encode is the server's.
+TEST_F(CudaRendererTest, StageTimesCoverTheFrame) {
+    test::RandomSceneParams p;
+    p.count = 20000;
+    const Scene scene = test::random_scene(test::fresh_seed("stage times"), p);
+    FrameStats stats;
+    gpu_render(scene, test::forward_camera(320, 240, 70.0), RenderOptions{}, &stats);
+    for (Stage stage : {Stage::preprocess, Stage::scan, Stage::keys, Stage::sort, Stage::ranges, Stage::rasterize,
+                        Stage::copy_out})
+        EXPECT_GT(stats.stage_ms[stage], 0.0) << stage_name(stage);
+    EXPECT_EQ(stats.stage_ms[Stage::encode], 0.0);
+    EXPECT_DOUBLE_EQ(stats.total_ms, stats.stage_ms.sum());
 }
 
 TEST_F(CudaRendererTest, DoublePrecisionMatchesCpuDouble) {

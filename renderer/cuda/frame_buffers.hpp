@@ -1,0 +1,147 @@
+// The device buffers of one CUDA renderer, grouped by what their size follows: the window of
+// poses, the scene's chunks, its Gaussians, the frame's tile-Gaussian pairs, its tiles and
+// its pixels. Every one is a grow-only arena (device_buffer.hpp), so a stream of frames
+// settles after a few frames and then allocates nothing.
+#pragma once
+
+#include <cuda_runtime_api.h>
+
+#include <cstddef>
+#include <cstdint>
+
+#include "catgs/constants.hpp"
+#include "catgs/stages/blend.hpp"
+#include "catgs/stages/project.hpp"
+#include "catgs/stages/split.hpp"
+#include "catgs/stages/view.hpp"
+#include "cuda_check.hpp"
+#include "device_buffer.hpp"
+#include "kernel_common.cuh"
+
+namespace catgs::cuda {
+
+/// Per window: the poses a key frame projects against, and the device counters.
+template <typename T>
+struct WindowBuffers {
+    DeviceArray<View<T>> views;
+    DeviceArray<Counters> counters;
+
+    std::size_t bytes() const { return views.bytes() + counters.bytes(); }
+};
+
+/// Per chunk of the scene: chunk culling's flags and the compacted list of visible chunks.
+struct ChunkBuffers {
+    DeviceArray<std::uint8_t> flags;  // 1 = some pose may see the chunk
+    DeviceArray<std::uint32_t> selected;  // the visible chunks, in scene order
+    DeviceArray<std::uint32_t> selected_count;
+    DeviceArray<std::uint8_t> select_temp;  // CUB's DeviceSelect
+
+    std::size_t bytes() const { return flags.bytes() + selected.bytes() + selected_count.bytes() + select_temp.bytes(); }
+};
+
+/// Per Gaussian: the projection by Gaussian index, and the counts, depths and offsets by slot
+/// of the chunk-compacted index space (ChunkSpace).
+template <typename T>
+struct GaussianBuffers {
+    DeviceArray<Projected<T>> projected;  // preprocess: at the actual pose
+    DeviceArray<std::uint64_t> visible;   // band path: full-frame tile counts
+    DeviceArray<std::uint64_t> touched;   // tile counts for the current pass, with a trailing 0
+    DeviceArray<float> sort_depth;        // preprocess: the depth keys sort by
+    DeviceArray<std::uint64_t> offsets;   // scan: exclusive sum; offsets[n] = pass total
+    DeviceArray<std::uint8_t> scan_temp;  // CUB's DeviceScan
+
+    std::size_t bytes() const {
+        return projected.bytes() + visible.bytes() + touched.bytes() + sort_depth.bytes() + offsets.bytes() +
+               scan_temp.bytes();
+    }
+};
+
+/// Per tile-Gaussian pair: the keys and values, double-buffered for the sort, and a key
+/// frame's pairs in emission order, which cached frames that re-sort re-key from.
+struct PairBuffers {
+    DeviceArray<std::uint64_t> keys[2];
+    DeviceArray<std::uint32_t> values[2];
+    int current = 0;  // which of keys/values holds the sorted pairs
+    DeviceArray<std::uint64_t> emitted_keys;
+    DeviceArray<std::uint32_t> emitted_values;
+    DeviceArray<std::uint8_t> sort_temp;  // CUB's DeviceRadixSort
+
+    std::size_t bytes() const {
+        return keys[0].bytes() + keys[1].bytes() + values[0].bytes() + values[1].bytes() + emitted_keys.bytes() +
+               emitted_values.bytes() + sort_temp.bytes();
+    }
+};
+
+/// Per tile, and per task of the task list: ranges, split slots and labels.
+struct TileBuffers {
+    DeviceArray<std::uint64_t> range_begin, range_end;  // ranges
+    DeviceArray<std::uint32_t> split_slot;   // split: first partial slot of a split tile, or kNoSlot
+    DeviceArray<std::uint32_t> split_tiles;  // split: the tiles merge composites
+    DeviceArray<TaskLabel> labels;           // split: the extra sub-tasks
+
+    std::size_t bytes() const {
+        return range_begin.bytes() + range_end.bytes() + split_slot.bytes() + split_tiles.bytes() + labels.bytes();
+    }
+};
+
+/// Per pixel: the sub-tasks' partial (R, A) and the finished image.
+template <typename T>
+struct PixelBuffers {
+    DeviceArray<Partial<T>> partials;      // rasterize: sub-task (R, A), merged by merge
+    DeviceArray<std::uint8_t> image_rgb8;  // rasterize / merge
+    DeviceArray<float> image_float;
+
+    std::size_t bytes() const { return partials.bytes() + image_rgb8.bytes() + image_float.bytes(); }
+};
+
+template <typename T>
+struct FrameBuffers {
+    WindowBuffers<T> window;
+    ChunkBuffers chunks;
+    GaussianBuffers<T> gaussians;
+    PairBuffers pairs;
+    TileBuffers tiles;
+    PixelBuffers<T> pixels;
+
+    std::size_t bytes() const {
+        return window.bytes() + chunks.bytes() + gaussians.bytes() + pairs.bytes() + tiles.bytes() + pixels.bytes();
+    }
+};
+
+/// Pinned host memory for one read-back: `reserve` reallocates to exactly what is asked when
+/// it is short.
+template <typename V>
+class PinnedArray {
+public:
+    PinnedArray() = default;
+    PinnedArray(const PinnedArray&) = delete;
+    PinnedArray& operator=(const PinnedArray&) = delete;
+    ~PinnedArray() { cudaFreeHost(data_); }  // not checked: runs in destructors
+
+    void reserve(std::size_t count) {
+        if (bytes_ >= count * sizeof(V)) return;
+        cudaFreeHost(data_);
+        data_ = nullptr;
+        CATGS_CUDA_CHECK(cudaMallocHost(&data_, count * sizeof(V)));
+        bytes_ = count * sizeof(V);
+    }
+    V* data() const { return data_; }
+
+private:
+    V* data_ = nullptr;
+    std::size_t bytes_ = 0;
+};
+
+/// The pinned host side of the frame's read-backs: the window's poses on their way up, the
+/// pass totals, the frame's counters and the image on their way down.
+template <typename T>
+struct HostStaging {
+    PinnedArray<View<T>> views;
+    PinnedArray<std::uint64_t> total;          // one read-back per scan
+    PinnedArray<std::uint32_t> selected;       // the visible chunk count of a key frame
+    PinnedArray<Counters> counters;
+    PinnedArray<std::uint8_t> rgb8;            // copy_out
+    PinnedArray<float> rgb_float;
+};
+
+}  // namespace catgs::cuda

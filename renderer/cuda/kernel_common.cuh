@@ -1,0 +1,115 @@
+// What the stage kernels of the CUDA backend share: launch sizes, the device view of the
+// scene, the chunk-compacted index space, the device counters and the projection of one
+// Gaussian against the window's poses. Included by the stage files (*.cu) only.
+#pragma once
+
+#include <cstdint>
+
+#include "catgs/constants.hpp"
+#include "catgs/scene.hpp"
+#include "catgs/stages/blend.hpp"
+#include "catgs/stages/project.hpp"
+#include "catgs/stages/view.hpp"
+
+namespace catgs::cuda {
+
+inline constexpr int kThreads = 256;                        // one Gaussian / pair / tile per thread
+inline constexpr int kTilePixels = kTileSize * kTileSize;  // one thread per pixel of a tile
+
+/// A tile that is not split has no partial slots.
+inline constexpr std::uint32_t kNoSlot = 0xffffffffu;
+
+inline unsigned blocks_for(std::uint64_t n, int threads) { return static_cast<unsigned>((n + threads - 1) / threads); }
+
+struct DeviceSceneView {
+    const float* positions;
+    const float* scales;
+    const float* rotations;
+    const float* opacities;
+    const float* sh;
+    int sh_degree;
+    std::uint64_t count;
+};
+
+/// Device-side counters, one allocation, read back once per frame. The frame part is reset
+/// every frame; the task part belongs to the task list, which cached frames reuse from their
+/// key frame, so only a key frame's split pass resets it.
+struct FrameCounters {
+    unsigned long long visible;       // Gaussians with tiles at the actual pose
+    unsigned int min_depth_bits;      // float bits of the nearest depth (positive floats order as ints)
+    unsigned int max_extent_bits;     // float bits of the largest non-full-grid half-extent
+    double inverse_depth_sum;         // over visible Gaussians at the actual pose
+};
+struct TaskCounters {
+    unsigned long long rendered_pairs;  // ranges: pairs inside the grid (cached frames park others)
+    unsigned int nonempty_tiles;      // ranges
+    unsigned int split_k;             // the k used (auto or fixed)
+    unsigned int extra_tasks;         // split: atomic task counter beyond the tiles
+    unsigned int split_slots;         // split: partial slots handed out
+    unsigned int split_tiles;         // split: tiles that were split
+};
+struct Counters {
+    FrameCounters frame;
+    TaskCounters tasks;
+};
+
+/// A CaT-GS label: the tile and split index of an extra task.
+struct TaskLabel {
+    std::uint32_t tile, index;
+};
+
+/// A key frame's compacted index space: slot p belongs to chunk selected[p / kChunkGaussians],
+/// so only the chunks that survived chunk culling are preprocessed, scanned and emitted.
+/// Per-slot buffers (tile counts, sort depths, offsets) are indexed by slot; the projected
+/// Gaussians and the pairs' values by Gaussian index. Slots past a short chunk's end are
+/// empty (a count of 0).
+struct ChunkSpace {
+    const Chunk* chunks;
+    const std::uint32_t* selected;
+    std::uint64_t slots;
+
+    /// The Gaussian of slot p, or false for an empty slot.
+    __device__ bool gaussian(std::uint64_t p, std::uint64_t& i) const {
+        const Chunk& c = chunks[selected[p / kChunkGaussians]];
+        i = c.begin + p % kChunkGaussians;
+        return i < c.end;
+    }
+};
+
+__device__ inline GaussianRef gaussian_ref(const DeviceSceneView& scene, std::uint64_t i) {
+    const std::size_t sh_stride = 3u * static_cast<std::size_t>(sh_coefficient_count(scene.sh_degree));
+    return GaussianRef{scene.positions + 3 * i, scene.scales + 3 * i, scene.rotations + 4 * i, scene.opacities[i],
+                       scene.sh + sh_stride * i, scene.sh_degree};
+}
+
+/// Projects Gaussian i against the window's poses; returns the mask of valid poses. Shared by
+/// the count (preprocess) and the keys pass so they cannot disagree.
+template <typename T, int MaxWindow>
+__device__ std::uint32_t project_window(const DeviceSceneView& scene, std::uint64_t i, const View<T>* views, int window,
+                                        Projected<T>* poses) {
+    const GaussianRef g = gaussian_ref(scene, i);
+    std::uint32_t valid = 0;
+#pragma unroll
+    for (int k = 0; k < MaxWindow; ++k)
+        if (k < window && project_geometry(g, views[k], poses[k])) valid |= 1u << k;
+    return valid;
+}
+
+/// Writes a final pixel: C + T * background, to 8-bit and/or float outputs (rasterize, merge).
+template <typename T>
+__device__ void write_pixel(const PixelAccumulator<T>& acc, Vec3<T> background, std::size_t o, std::uint8_t* out_rgb8,
+                            float* out_float) {
+    const Vec3<T> c = finish_pixel(acc, background);
+    if (out_rgb8) {
+        out_rgb8[o] = quantize_8bit(c.x);
+        out_rgb8[o + 1] = quantize_8bit(c.y);
+        out_rgb8[o + 2] = quantize_8bit(c.z);
+    }
+    if (out_float) {
+        out_float[o] = static_cast<float>(c.x);
+        out_float[o + 1] = static_cast<float>(c.y);
+        out_float[o + 2] = static_cast<float>(c.z);
+    }
+}
+
+}  // namespace catgs::cuda

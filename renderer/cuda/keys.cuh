@@ -1,0 +1,76 @@
+// keys: one (tile | depth) sort key per tile-Gaussian pair (stages/keys.hpp), emitted at each
+// Gaussian's scanned offset; rekey is the cached frames' keys, re-keying the key frame's pairs
+// at the current pose. When a frame's pairs pass the pair budget it is cut into bands of tile
+// rows (band_rows), and count_band recounts each band before its scan.
+#pragma once
+
+#include <cuda_runtime_api.h>
+
+#include <cstdint>
+#include <vector>
+
+#include "catgs/stages/culling.hpp"
+#include "catgs/stages/project.hpp"
+#include "catgs/stages/tiles.hpp"
+#include "catgs/stages/view.hpp"
+#include "kernel_common.cuh"
+
+namespace catgs::cuda {
+
+template <typename T>
+struct KeysArgs {
+    DeviceSceneView scene;
+    ChunkSpace space;
+    const View<T>* views;   // the window's poses
+    int window;
+    Culling culling;
+    T guard;
+    const Projected<T>* projected;
+    const std::uint64_t* touched;
+    const std::uint64_t* offsets;
+    const float* sort_depth;
+    TileRows rows;          // the band's tile rows (all of them when not banded)
+    bool band;              // banded: one pose, whose geometry preprocess stored
+    bool reprojected;       // the window lowered the near plane (PreprocessArgs::reproject_actual)
+    std::uint64_t capacity;  // bounds every write
+    std::uint64_t* keys;
+    std::uint32_t* values;
+};
+
+template <typename T>
+void keys(const KeysArgs<T>& args, cudaStream_t stream);
+
+template <typename T>
+struct RekeyArgs {
+    std::uint64_t pairs;
+    const std::uint64_t* emitted_keys;   // the key frame's pairs in emission order
+    const std::uint32_t* emitted_values;
+    const Projected<T>* projected;       // at the current pose (reproject)
+    View<T> view;
+    Culling culling;
+    std::uint64_t* keys;
+    std::uint32_t* values;
+};
+
+template <typename T>
+void rekey(const RekeyArgs<T>& args, cudaStream_t stream);
+
+template <typename T>
+struct CountBandArgs {
+    ChunkSpace space;
+    const Projected<T>* projected;
+    const std::uint64_t* visible;  // the full-frame counts: 0 = in no list
+    View<T> view;
+    Culling culling;
+    TileRows rows;
+    std::uint64_t* touched;
+};
+
+template <typename T>
+void count_band(const CountBandArgs<T>& args, cudaStream_t stream);
+
+/// The bands of tile rows for a frame of `total` pairs over a budget of `budget`: about twice
+/// as many as the budget asks for, so that uneven rows still fit.
+std::vector<TileRows> band_rows(std::uint64_t total, std::uint64_t budget, int tiles_y);
+
+}  // namespace catgs::cuda

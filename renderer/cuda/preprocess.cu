@@ -1,0 +1,153 @@
+#include "preprocess.cuh"
+
+#include <cub/block/block_reduce.cuh>
+#include <cuda/functional>
+
+#include "catgs/stages/envelope.hpp"
+#include "catgs/stages/footprint.hpp"
+#include "catgs/stages/keys.hpp"
+#include "catgs/stages/tiles.hpp"
+#include "cuda_check.hpp"
+
+namespace catgs::cuda {
+namespace {
+
+// Counts the tiles of the union of each Gaussian's footprints over the window
+// (MaxWindow = 1: the plain single-frame pipeline) and projects it at the actual pose for
+// rasterizing (opacity 0 when culled there). Key frames of the cache also reduce what the
+// planner needs: nearest depth, mean inverse depth, largest footprint.
+template <typename T, int MaxWindow, bool Summarize>
+__global__ void preprocess_kernel(DeviceSceneView scene, ChunkSpace space, const View<T>* views, int window, View<T> actual,
+                                  bool reproject_actual, Culling culling, T guard, T guard_translation,
+                                  Projected<T>* projected, std::uint64_t* touched, float* sort_depth,
+                                  FrameCounters* counters) {
+    const std::uint64_t slot = static_cast<std::uint64_t>(blockIdx.x) * blockDim.x + threadIdx.x;
+    bool visible = false;
+    float nearest = INFINITY, extent = 0.0f;
+    double inverse_depth = 0.0;
+    std::uint64_t i = 0;
+    const bool present = slot < space.slots && space.gaussian(slot, i);
+    if (slot < space.slots && !present) touched[slot] = 0;
+    if (present) {
+        Projected<T> poses[MaxWindow];
+        const std::uint32_t valid = project_window<T, MaxWindow>(scene, i, views, window, poses);
+        const std::uint32_t tiles =
+            for_each_window_tile<MaxWindow>(poses, valid, window, culling, guard, views[0], [](std::uint32_t) {});
+        touched[slot] = tiles;
+        if (Summarize && tiles == 0 && guard > T(0) && culling != Culling::exact && (valid & 1u)) {
+            // In no list, but able to enter the image within the envelope (envelope.hpp).
+            const float* sc = gaussian_ref(scene, i).scale;
+            T bound = T(0);
+            if (uncached_can_enter(poses[0], culling, views[0], guard, guard_translation,
+                                   static_cast<T>(fmaxf(fabsf(sc[0]), fmaxf(fabsf(sc[1]), fabsf(sc[2])))), bound)) {
+                nearest = fminf(nearest, static_cast<float>(poses[0].depth));
+                extent = fmaxf(extent, static_cast<float>(bound));
+            }
+        }
+        if (tiles > 0) {
+            sort_depth[slot] = poses[first_valid_pose(valid)].key_depth;
+            // At the actual pose: pose 0's geometry unless the window lowered the near plane;
+            // the SH colour only now that the Gaussian is known to touch a tile.
+            const GaussianRef g = gaussian_ref(scene, i);
+            Projected<T> p = poses[0];
+            bool at_actual = (valid & 1u) != 0;
+            if (reproject_actual) at_actual = project_geometry(g, actual, p);
+            if (at_actual)
+                shade_gaussian(g, actual, p);
+            else
+                p.opacity = T(0);
+            projected[i] = p;
+            visible = at_actual;
+            if (Summarize) {
+#pragma unroll
+                for (int k = 0; k < MaxWindow; ++k)
+                    if (k < window && (valid >> k & 1u)) nearest = fminf(nearest, static_cast<float>(poses[k].depth));
+                if (at_actual) {
+                    inverse_depth = 1.0 / static_cast<double>(p.depth);
+                    if (cached_can_gain_tiles(culling, tiles, actual)) {
+                        const float* sc = g.scale;
+                        extent = fmaxf(0.0f, static_cast<float>(cached_extent_bound_px(
+                                                 p, culling, static_cast<T>(fmaxf(sc[0], fmaxf(sc[1], sc[2]))),
+                                                 actual.fx > actual.fy ? actual.fx : actual.fy)));
+                    }
+                }
+            }
+        }
+    }
+    const int block_visible = __syncthreads_count(visible);
+    if (threadIdx.x == 0 && block_visible > 0)
+        atomicAdd(&counters->visible, static_cast<unsigned long long>(block_visible));
+    if (Summarize) {
+        using FloatReduce = cub::BlockReduce<float, kThreads>;
+        using DoubleReduce = cub::BlockReduce<double, kThreads>;
+        __shared__ union {
+            typename FloatReduce::TempStorage f;
+            typename DoubleReduce::TempStorage d;
+        } temp;
+        const float block_nearest = FloatReduce(temp.f).Reduce(nearest, ::cuda::minimum<float>{});
+        __syncthreads();
+        const float block_extent = FloatReduce(temp.f).Reduce(extent, ::cuda::maximum<float>{});
+        __syncthreads();
+        const double block_inverse = DoubleReduce(temp.d).Sum(inverse_depth);
+        if (threadIdx.x == 0) {
+            if (block_nearest < INFINITY) atomicMin(&counters->min_depth_bits, __float_as_uint(block_nearest));
+            atomicMax(&counters->max_extent_bits, __float_as_uint(block_extent));
+            if (block_inverse > 0) atomicAdd(&counters->inverse_depth_sum, block_inverse);
+        }
+    }
+}
+
+// Cached frame: re-project the cached Gaussians at the actual pose (opacity 0 if culled).
+template <typename T>
+__global__ void reproject_kernel(DeviceSceneView scene, ChunkSpace space, View<T> actual, const std::uint64_t* touched,
+                                 Projected<T>* projected, FrameCounters* counters) {
+    const std::uint64_t p = static_cast<std::uint64_t>(blockIdx.x) * blockDim.x + threadIdx.x;
+    bool visible = false;
+    std::uint64_t i = 0;
+    if (p < space.slots && touched[p] > 0 && space.gaussian(p, i)) {
+        Projected<T> p;
+        visible = project_gaussian(gaussian_ref(scene, i), actual, p);
+        if (!visible) p.opacity = T(0);
+        projected[i] = p;
+    }
+    const int block_visible = __syncthreads_count(visible);
+    if (threadIdx.x == 0 && block_visible > 0)
+        atomicAdd(&counters->visible, static_cast<unsigned long long>(block_visible));
+}
+
+}  // namespace
+
+template <typename T>
+void preprocess(const PreprocessArgs<T>& a, cudaStream_t s) {
+    CATGS_CUDA_CHECK(cudaMemsetAsync(a.touched + a.space.slots, 0, sizeof(std::uint64_t), s));
+    if (a.space.slots == 0) return;
+    const unsigned blocks = blocks_for(a.space.slots, kThreads);
+    if (a.window == 1 && !a.summarize)
+        preprocess_kernel<T, 1, false><<<blocks, kThreads, 0, s>>>(
+            a.scene, a.space, a.views, 1, a.actual, a.reproject_actual, a.culling, a.guard, a.guard_translation,
+            a.projected, a.touched, a.sort_depth, a.counters);
+    else if (a.window == 1)
+        preprocess_kernel<T, 1, true><<<blocks, kThreads, 0, s>>>(
+            a.scene, a.space, a.views, 1, a.actual, a.reproject_actual, a.culling, a.guard, a.guard_translation,
+            a.projected, a.touched, a.sort_depth, a.counters);
+    else
+        preprocess_kernel<T, kMaxWindow, true><<<blocks, kThreads, 0, s>>>(
+            a.scene, a.space, a.views, a.window, a.actual, a.reproject_actual, a.culling, a.guard, a.guard_translation,
+            a.projected, a.touched, a.sort_depth, a.counters);
+    CATGS_CUDA_CHECK_LAUNCH("preprocess_kernel");
+}
+
+template <typename T>
+void reproject(const ReprojectArgs<T>& a, cudaStream_t s) {
+    if (a.space.slots == 0) return;
+    reproject_kernel<T><<<blocks_for(a.space.slots, kThreads), kThreads, 0, s>>>(a.scene, a.space, a.actual, a.touched,
+                                                                               a.projected, a.counters);
+    CATGS_CUDA_CHECK_LAUNCH("reproject_kernel");
+}
+
+template void preprocess(const PreprocessArgs<float>&, cudaStream_t);
+template void preprocess(const PreprocessArgs<double>&, cudaStream_t);
+template void reproject(const ReprojectArgs<float>&, cudaStream_t);
+template void reproject(const ReprojectArgs<double>&, cudaStream_t);
+
+}  // namespace catgs::cuda

@@ -1,0 +1,51 @@
+// rasterize: one 256-thread block per task (a 16x16 tile or a sub-task of a split tile), the
+// Gaussians staged through shared memory a batch at a time and blended front to back per pixel
+// (stages/blend.hpp). Tiles that are not split write their pixels; sub-tasks write partial
+// (R, A) for merge.
+#pragma once
+
+#include <cuda_runtime_api.h>
+
+#include <cstdint>
+
+#include "catgs/math.hpp"
+#include "catgs/stages/blend.hpp"
+#include "catgs/stages/project.hpp"
+#include "catgs/stages/split.hpp"
+#include "catgs/stages/view.hpp"
+#include "kernel_common.cuh"
+
+namespace catgs::cuda {
+
+struct TaskGrid {
+    std::uint32_t first_tile;  // tiles of this band: [first_tile, first_tile + band_tiles)
+    std::uint32_t band_tiles;
+    bool split;                // split_slot / labels / partials are valid
+    bool shared_list;          // exact culling: one list for every tile
+    std::uint64_t list_size;
+    bool warp_skip;            // warps skip Gaussians whose visible_box misses their block
+};
+
+template <typename T>
+struct RasterizeArgs {
+    TaskGrid grid;
+    std::uint64_t blocks;      // the band's tiles plus room for its extra sub-tasks
+    const std::uint64_t* range_begin;
+    const std::uint64_t* range_end;
+    const std::uint32_t* split_slot;
+    const TaskLabel* labels;
+    const TaskCounters* counters;
+    const std::uint32_t* values;  // sorted
+    const Projected<T>* projected;
+    View<T> view;
+    Vec3<T> background;
+    T tail_transmittance;      // where a split tile's later sub-tasks stop
+    Partial<T>* partials;
+    std::uint8_t* out_rgb8;    // either may be null
+    float* out_float;
+};
+
+template <typename T>
+void rasterize(const RasterizeArgs<T>& args, cudaStream_t stream);
+
+}  // namespace catgs::cuda

@@ -1,0 +1,121 @@
+// The state of one CudaRenderer (its Impl) and of the frame being rendered (Frame), shared
+// by cuda_renderer.cu, which runs the passes, and stage_readback.cu.
+#pragma once
+
+#include <cuda_runtime_api.h>
+
+#include <cstddef>
+#include <cstdint>
+#include <memory>
+#include <vector>
+
+#include "catgs/cache.hpp"
+#include "catgs/render_options.hpp"
+#include "catgs/stages/tiles.hpp"
+#include "catgs/stages/view.hpp"
+#include "cuda_renderer.hpp"
+#include "frame_buffers.hpp"
+#include "kernel_common.cuh"
+#include "scan.cuh"
+#include "stage_events.hpp"
+
+namespace catgs::cuda {
+
+/// What the passes of one frame share: its plan and what follows from it.
+template <typename T>
+struct Frame {
+    const RenderOptions* options = nullptr;
+    FramePlanner::Plan plan;
+    CacheMode cache = CacheMode::off;  // the mode this frame renders with (plan.cache)
+    View<T> view;                      // the actual pose
+    DeviceSceneView scene{};
+    std::uint64_t tiles = 0;
+    std::size_t pixels = 0;
+    int tile_bits = 0;
+    bool shared_list = false;  // exact culling: one list serves every tile
+    bool splitting = false;
+    bool speculative = false;
+    /// The window's near plane (FramePlanner::Plan::window_near_plane); when lowered, the actual
+    /// pose is projected again with the real one.
+    double near = 0;
+    bool reproject_actual = false;
+    T guard = T(0), guard_translation = T(0);
+    /// The extra-task and slot bounds of the task list (k is at least the floor when automatic).
+    std::uint64_t k_min = 1;
+    Vec3<T> background{};
+    T tail = T(0);
+
+    std::uint64_t total = 0;  // the frame's pairs
+    std::vector<TileRows> bands;
+    bool split_used = false;
+};
+
+/// What read_back_stages needs to know of the frame whose lists the device holds.
+struct LastFrame {
+    bool rendered = false;
+    std::uint64_t pairs = 0, tiles = 0, max_extra = 0;
+    bool shared_list = false, split_used = false, banded = false;
+    TaskCounters tasks{};
+};
+
+template <typename T>
+struct CudaRenderer<T>::Impl {
+    cudaStream_t stream = nullptr;
+    bool own_stream = false;
+    CudaLimits limits;
+    std::shared_ptr<const DeviceScene> scene;
+    StageEvents events;
+    FramePlanner planner;
+    // The planner plans cached frames only after key_rendered, for lists the device holds.
+    std::uint64_t cached_pairs = 0;     // pairs of the cached lists
+    bool cached_split = false;          // the cached task list has split tiles
+    ChunkSpace key_space{};             // the key frame's compacted index space (cached frames reuse it)
+    std::uint64_t key_chunks_culled = 0;
+    FrameBuffers<T> buffers;
+    HostStaging<T> host;
+    LastFrame last;  // read_back_stages
+
+    FrameCounters* frame_counters() { return &buffers.window.counters.data()->frame; }
+    TaskCounters* task_counters() { return &buffers.window.counters.data()->tasks; }
+
+    /// Most pairs one pass may hold (CudaLimits::max_pairs, derived at the first frame when 0).
+    std::uint64_t pair_budget();
+
+    Frame<T> plan_frame(const Camera& camera, const RenderOptions& options, const FrameHints* hints);
+    void begin_frame(const Frame<T>& f, bool rgb8, bool rgb_float);
+    // A key frame's lists.
+    void chunk_cull(Frame<T>& f);
+    void preprocess(Frame<T>& f);
+    void scan(Frame<T>& f);
+    void plan_bands(Frame<T>& f, std::uint64_t budget);
+    std::uint64_t count_band(const Frame<T>& f, TileRows rows);
+    void keys(const Frame<T>& f, TileRows rows, std::uint64_t pairs);
+    void add_list_times(Event pass_start);
+    // A cached frame's lists.
+    void reproject(Frame<T>& f);
+    void rekey(const Frame<T>& f);
+    void add_cached_list_times();
+    // Both.
+    void sort(const Frame<T>& f, std::uint64_t pairs);
+    bool ranges_and_split(const Frame<T>& f, std::uint64_t pairs);
+    void rasterize(const Frame<T>& f, TileRows rows, std::uint64_t pairs, std::uint8_t* rgb8, float* rgb_float);
+    void merge(const Frame<T>& f, std::uint64_t pairs, std::uint8_t* rgb8, float* rgb_float);
+    void copy_out(const Frame<T>& f, ImageRGB8* rgb8, ImageF* rgb_float);
+    void key_rendered(const Frame<T>& f, const FrameCounters& c);
+    FrameStats frame_stats(const Frame<T>& f) const;
+
+    std::uint64_t max_extra_tasks(const Frame<T>& f, std::uint64_t pairs) const {
+        return f.split_used ? pairs / f.k_min + 1 : 0;
+    }
+    std::uint64_t scan_counts(std::uint64_t slots) {
+        GaussianBuffers<T>& g = buffers.gaussians;
+        return cuda::scan(ScanArgs{g.touched.data(), g.offsets.data(), slots, &g.scan_temp, host.total.data()}, stream);
+    }
+    DeviceSceneView scene_view() const {
+        const DeviceScene& s = *scene;
+        return DeviceSceneView{s.positions(), s.scales(), s.rotations(), s.opacities(), s.sh(), s.sh_degree(), s.count()};
+    }
+};
+
+
+}  // namespace catgs::cuda

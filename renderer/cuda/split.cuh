@@ -1,0 +1,27 @@
+// split: the task list, CaT-GS Algorithm 1 (stages/split.hpp): the lists longer than k cut
+// into sub-tasks, appended through an atomic task counter with (tile, split index) labels.
+#pragma once
+
+#include <cuda_runtime_api.h>
+
+#include <cstdint>
+
+#include "kernel_common.cuh"
+
+namespace catgs::cuda {
+
+struct SplitArgs {
+    std::uint32_t tiles;
+    const std::uint64_t* range_begin;
+    const std::uint64_t* range_end;
+    std::uint64_t max_extra;     // room in labels
+    bool auto_k;                 // derive k from this frame's lists
+    TaskCounters* counters;
+    std::uint32_t* split_slot;
+    TaskLabel* labels;
+    std::uint32_t* split_tiles;
+};
+
+void split(const SplitArgs& args, cudaStream_t stream);
+
+}  // namespace catgs::cuda
