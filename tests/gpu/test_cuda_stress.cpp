@@ -1,20 +1,22 @@
-// Numerical stress suite, GPU part: the adversarial scenes of tests/stress_scenes.hpp through
-// cuda::CudaRenderer<float> in every culling mode, plain, with CaT-GS split (k = 8) and with
-// the speculative cache over a 6-frame path, against the exact double CPU reference
-// (CpuRenderer<double>, exact culling). Both outputs are checked: the float image must be
-// finite, the 8-bit image must be the quantised float image, and the 8-bit image must be
-// within the family's bound. Every test skips when no CUDA device is present.
+// Numerical stress suite, GPU part. The backend "cuda" of the shared suite (stress_suite.cpp
+// runs the adversarial scenes of stress_scenes.hpp through it): cuda::CudaRenderer<float> in
+// every culling mode, plain, with CaT-GS split (k = 8) and with the speculative cache over a
+// 6-frame path, against the exact double CPU reference (CpuRenderer<double>, exact culling).
+// Both outputs are checked: the float image must be finite, the 8-bit image must be the
+// quantised float image, and the 8-bit image must be within the family's bound. Here too the
+// GPU's own tests (8192 x 8192, determinism, single Gaussians, the cache envelope). Every test
+// skips when no CUDA device is present.
 //
-// What both parts run the same way (configurations, measurements, the property tests' cases)
-// is in tests/stress_harness.hpp. The CPU part (tests/test_stress.cpp) explains the families
-// and the CPU bounds; the GPU bounds below add what differs on the device: nvcc contracts
-// multiply-adds into FMAs and CUDA's exp differs from glibc's by an ulp, so a value near a
-// threshold (alpha = 1/255, T = 1e-4, power = 0, a half level) can land on the other side.
+// The CPU part (tests/test_stress.cpp) explains the families and the CPU bounds; the GPU
+// bounds below add what differs on the device: nvcc contracts multiply-adds into FMAs and
+// CUDA's exp differs from glibc's by an ulp, so a value near a threshold (alpha = 1/255,
+// T = 1e-4, power = 0, a half level) can land on the other side.
 #include <gtest/gtest.h>
 
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <iostream>
 
 #include "../stress_harness.hpp"
 #include "../stress_scenes.hpp"
@@ -30,20 +32,15 @@ using test::stress::Bound;
 using test::stress::Config;
 using test::stress::Family;
 using test::stress::Frame;
-using test::stress::Measured;
 using test::stress::Mode;
 using test::stress::StressCase;
 using test::stress::cache_vs_full_levels;
 using test::stress::count_nonfinite;
-using test::stress::describe;
 using test::stress::kBackground;
 using test::stress::one_gaussian;
 using test::stress::options_for;
 using test::stress::seed_note;
 namespace stress = test::stress;
-
-/// Log lines "[cuda stress] ...", seeds "cuda stress ...".
-const std::string kSuite = "cuda stress";
 
 class CudaStressTest : public ::testing::Test {
 protected:
@@ -73,33 +70,13 @@ std::vector<Frame> gpu_frames(const StressCase& c, Culling culling, Mode mode) {
     return out;
 }
 
-ImageRGB8 reference(const Scene& scene, const Camera& camera) {
-    CpuRenderer<double> r;
-    RenderOptions o = options_for(Culling::exact, Mode::plain);
-    ImageF out;
-    r.render(scene, camera, o, out);
-    return to_rgb8(out);
-}
-
-/// Also counts the values of the GPU's 8-bit image that differ from its float image quantised.
-Measured measure(const std::vector<Frame>& frames, const std::vector<ImageRGB8>& refs) {
-    Measured m;
-    m.rgb8_checked = true;
-    for (std::size_t k = 0; k < frames.size(); ++k) {
-        m.add(frames[k], refs[k]);
-        const ImageRGB8 q = to_rgb8(frames[k].image);
-        for (std::size_t i = 0; i < q.rgb.size() && i < frames[k].rgb8.rgb.size(); ++i)
-            m.rgb8_mismatch += q.rgb[i] != frames[k].rgb8.rgb[i];
-        m.rgb8_mismatch += q.rgb.size() != frames[k].rgb8.rgb.size();
-    }
-    return m;
-}
+ImageRGB8 reference(const Scene& scene, const Camera& camera) { return stress::reference_frame(scene, camera).rgb8; }
 
 // --- Bounds -----------------------------------------------------------------------------
-// Measured with MeasureBounds below on an H200 (the device these runs got), on the renderer
-// with the fixes of the CPU suite's StressBugs applied, over 140 seeds; quoted as (max levels /
-// PSNR / % of values more than one level off); bbox3sigma maxima get 50% of margin, as on the
-// CPU. Where float itself is the cause (the lines of huge_scales and field_of_view, depth ties
+// Measured with StressProperty.DISABLED_MeasureBounds/cuda on an H200 (the device these runs
+// got), on the renderer with the fixes of the CPU suite's StressBugs applied, over 140 seeds;
+// quoted as (max levels / PSNR / % of values more than one level off); bbox3sigma maxima get
+// 50% of margin, as on the CPU. Where float itself is the cause (the lines of huge_scales and field_of_view, depth ties
 // in the mixtures, see test_stress.cpp) the bound is the CPU float bound, set from 350 seeds
 // and 300 property-test runs: the largest difference unbounded, PSNR and fraction bounded.
 
@@ -167,52 +144,39 @@ Bound bound_for(Family f, const Config& cfg) {
 
 std::string class_label(const Config& cfg) { return stress::bound_class_name(stress::bound_class(cfg)); }
 
-stress::Classes check_case(const StressCase& c, const std::string& note, bool small_image) {
-    std::vector<ImageRGB8> refs;
-    for (const Camera& cam : c.path) refs.push_back(reference(c.scene, cam));
-    stress::Classes classes;
-    for (const Config& cfg : all_configs()) {
-        const Measured m = measure(gpu_frames(c, cfg.culling, cfg.mode), refs);
-        classes[class_label(cfg)].merge(m);
-        const std::string what = c.name + ", " + cuda_name(cfg) + ": " + describe(m) + " " + note;
-        stress::expect_within(m, bound_for(c.family, cfg), small_image, what);
-        EXPECT_EQ(m.rgb8_mismatch, 0u) << what;
+/// The CUDA backend of the shared suite: float only, the 8-bit image written on the device.
+class CudaStressBackend final : public stress::Backend {
+public:
+    std::string name() const override { return "cuda"; }
+    /// Log lines "[cuda stress] ...", seeds "cuda stress ...".
+    std::string suite() const override { return "cuda stress"; }
+    std::string unavailable() const override {
+        std::string reason;
+        return cuda::device_available(&reason) ? std::string() : "no CUDA device: " + reason;
     }
-    return classes;
+    std::vector<Config> configs() const override { return all_configs(); }
+    std::string config_name(const Config& cfg) const override { return cuda_name(cfg); }
+    std::string class_label(const Config& cfg) const override { return catgs::class_label(cfg); }
+    Bound bound_for(Family f, const Config& cfg) const override { return catgs::bound_for(f, cfg); }
+    std::vector<Frame> render(const StressCase& c, const Config& cfg) const override {
+        return gpu_frames(c, cfg.culling, cfg.mode);
+    }
+    bool writes_rgb8() const override { return true; }
+};
+
+}  // namespace
+
+namespace test::stress {
+const std::vector<const Backend*>& stress_backends() {
+    static const CudaStressBackend cuda;
+    static const std::vector<const Backend*> backends{&cuda};
+    return backends;
 }
+}  // namespace test::stress
 
-void run_family(StressCase (*make)(std::uint64_t), const std::string& what) {
-    stress::run_family(kSuite, check_case, make, what);
-}
+namespace {
 
-// --- Families -------------------------------------------------------------------------
-
-TEST_F(CudaStressTest, TinyScales) { run_family(stress::tiny_scales, "tiny scales"); }
-TEST_F(CudaStressTest, HugeScales) { run_family(stress::huge_scales, "huge scales"); }
-TEST_F(CudaStressTest, ZeroNanAndNonNormalisedQuaternions) { run_family(stress::quaternions, "quaternions"); }
-TEST_F(CudaStressTest, ExtremeOpacities) { run_family(stress::opacities, "opacities"); }
-TEST_F(CudaStressTest, HugeShCoefficients) { run_family(stress::huge_sh, "huge sh"); }
-TEST_F(CudaStressTest, ShNearFloatMaxAndInfinite) { run_family(stress::extreme_sh, "extreme sh"); }
-TEST_F(CudaStressTest, NearPlaneCameraCentreAndBehind) { run_family(stress::near_plane, "near plane"); }
-TEST_F(CudaStressTest, MeansOnTheImageBorder) { run_family(stress::image_border, "image border"); }
-TEST_F(CudaStressTest, TenMillionMetresAway) { run_family(stress::far_away, "far away"); }
-TEST_F(CudaStressTest, UtmOriginAndCamera) { run_family(stress::utm, "utm"); }
-TEST_F(CudaStressTest, CameraInsideLargeGaussians) { run_family(stress::camera_inside, "camera inside"); }
-TEST_F(CudaStressTest, DegenerateCovariances) { run_family(stress::degenerate, "degenerate"); }
-TEST_F(CudaStressTest, InvalidValuesAreCulled) { run_family(stress::invalid, "invalid"); }
-TEST_F(CudaStressTest, EqualDepthTies) { run_family(stress::ties, "ties"); }
-
-TEST_F(CudaStressTest, RandomAdversarialMixtures) {
-    stress::run_cases(kSuite, "mixtures", stress::mixture_cases, check_case);
-}
-
-TEST_F(CudaStressTest, FieldOfViewFiveToHundredFiftyDegrees) {
-    stress::run_cases(kSuite, "field of view", stress::field_of_view_cases, check_case);
-}
-
-TEST_F(CudaStressTest, TinyAndOddResolutions) {
-    stress::run_cases(kSuite, "resolutions", stress::resolution_cases, check_case);
-}
+// --- The GPU's own tests ----------------------------------------------------------------
 
 // 8192 x 8192 in every culling mode and configuration, with 300 adversarial Gaussians of
 // bounded footprint: the exact double reference on crops around them (the same camera with
@@ -376,20 +340,6 @@ TEST_F(CudaStressTest, CacheEnvelopeHoldsForANearGaussianJustOutsideTheImage) {
                   << cached_frames << " cached, worst " << worst << " levels" << std::endl;
         EXPECT_LE(worst, cache_vs_full_levels(culling)) << culling_name(culling);
     }
-}
-
-// --- Measurement (run by hand on a GPU host to re-derive the bounds) ----------------------
-
-TEST_F(CudaStressTest, DISABLED_MeasureBounds) {
-    stress::measure_bounds(kSuite, [](const StressCase& c, stress::Classes& worst) {
-        std::vector<ImageRGB8> refs;
-        for (const Camera& cam : c.path) refs.push_back(reference(c.scene, cam));
-        for (const Config& cfg : all_configs()) {
-            const Measured m = measure(gpu_frames(c, cfg.culling, cfg.mode), refs);
-            worst[std::string(stress::family_name(c.family)) + " " + class_label(cfg)].merge(m);
-            worst[std::string(stress::family_name(c.family)) + " / " + cuda_name(cfg)].merge(m);
-        }
-    });
 }
 
 }  // namespace

@@ -1,0 +1,240 @@
+// The backend-neutral half of the stress suite, documented in stress_harness.hpp.
+#include "stress_harness.hpp"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <iomanip>
+#include <iostream>
+#include <sstream>
+#include <stdexcept>
+#include <utility>
+
+#include "catgs/cache.hpp"
+#include "catgs/cpu_renderer.hpp"
+#include "test_util.hpp"
+
+namespace catgs::test::stress {
+
+std::vector<Config> all_configs(bool with_double) {
+    std::vector<Config> out;
+    for (bool d : {false, true}) {
+        if (d && !with_double) break;
+        for (Culling c : {Culling::exact, Culling::bbox3sigma, Culling::opacity_aware})
+            for (Mode m : {Mode::plain, Mode::split, Mode::cache}) {
+                if (d && c == Culling::exact && m == Mode::plain) continue;
+                out.push_back({d, c, m});
+            }
+    }
+    return out;
+}
+
+RenderOptions options_for(Culling culling, Mode mode) {
+    RenderOptions o;
+    o.culling = culling;
+    o.background = kBackground;
+    if (mode == Mode::split) o.catgs.split_k = kSplitK;
+    if (mode == Mode::cache) o.catgs.cache = CacheMode::speculative;
+    return o;
+}
+
+std::size_t count_nonfinite(const ImageF& image) {
+    return static_cast<std::size_t>(
+        std::count_if(image.rgb.begin(), image.rgb.end(), [](float v) { return !std::isfinite(v); }));
+}
+
+void Measured::add(const Frame& f, const ImageRGB8& reference) {
+    const ImageError e = compare(f.rgb8, reference);
+    max_abs = std::max(max_abs, e.max_abs);
+    min_psnr = std::min(min_psnr, e.psnr);
+    max_over_one = std::max(max_over_one, e.fraction_over_one);
+    nonfinite += count_nonfinite(f.image);
+    ++frames;
+    cached += !f.stats.key_frame;
+}
+
+void Measured::merge(const Measured& o) {
+    max_abs = std::max(max_abs, o.max_abs);
+    min_psnr = std::min(min_psnr, o.min_psnr);
+    max_over_one = std::max(max_over_one, o.max_over_one);
+    nonfinite += o.nonfinite;
+    rgb8_checked = rgb8_checked || o.rgb8_checked;
+    rgb8_mismatch += o.rgb8_mismatch;
+    frames += o.frames;
+    cached += o.cached;
+}
+
+std::string describe(const Measured& m) {
+    std::ostringstream s;
+    s << "max " << m.max_abs << " levels, psnr " << std::fixed << std::setprecision(1) << m.min_psnr << " dB, "
+      << std::setprecision(4) << 100 * m.max_over_one << "% > 1 level, " << m.nonfinite << " non-finite, ";
+    if (m.rgb8_checked) s << m.rgb8_mismatch << " rgb8 != quantised float, ";
+    s << m.cached << "/" << m.frames << " cached";
+    return s.str();
+}
+
+void report(const std::string& suite, const std::string& what, const Classes& classes) {
+    for (const auto& [name, m] : classes)
+        std::cout << "[" << suite << "] " << what << ", " << name << ": " << describe(m) << std::endl;
+}
+
+const char* bound_class_name(BoundClass k) {
+    switch (k) {
+        case BoundClass::lossless: return "lossless";
+        case BoundClass::split: return "split";
+        case BoundClass::bbox3sigma: return "bbox3sigma";
+    }
+    return "?";
+}
+
+void expect_within(const Measured& m, const Bound& b, bool small_image, const std::string& what) {
+    EXPECT_EQ(m.nonfinite, 0u) << what;
+    EXPECT_LE(m.max_abs, b.max_levels) << what;
+    if (!small_image) {
+        EXPECT_GE(m.min_psnr, b.min_psnr) << what;
+        EXPECT_LE(m.max_over_one, b.max_over_one) << what;
+    }
+}
+
+// --- Backends -------------------------------------------------------------------------
+
+std::vector<std::string> stress_backend_names() {
+    std::vector<std::string> names;
+    for (const Backend* b : stress_backends()) names.push_back(b->name());
+    return names;
+}
+
+const Backend& stress_backend(const std::string& name) {
+    for (const Backend* b : stress_backends())
+        if (b->name() == name) return *b;
+    throw std::invalid_argument("no stress backend '" + name + "' in this binary");
+}
+
+Frame reference_frame(const Scene& scene, const Camera& camera) {
+    CpuRenderer<double> renderer;
+    Frame f;
+    f.stats = renderer.render(scene, camera, options_for(Culling::exact, Mode::plain), f.image);
+    f.rgb8 = to_rgb8(f.image);
+    return f;
+}
+
+std::vector<Frame> reference_frames(const StressCase& c) {
+    std::vector<Frame> out;
+    for (const Camera& cam : c.path) out.push_back(reference_frame(c.scene, cam));
+    return out;
+}
+
+Measured measure(const Backend& backend, const std::vector<Frame>& frames, const std::vector<Frame>& reference) {
+    Measured m;
+    m.rgb8_checked = backend.writes_rgb8();
+    for (std::size_t k = 0; k < frames.size(); ++k) {
+        m.add(frames[k], reference[k].rgb8);
+        if (!m.rgb8_checked) continue;
+        const ImageRGB8 q = to_rgb8(frames[k].image);
+        for (std::size_t i = 0; i < q.rgb.size() && i < frames[k].rgb8.rgb.size(); ++i)
+            m.rgb8_mismatch += q.rgb[i] != frames[k].rgb8.rgb[i];
+        m.rgb8_mismatch += q.rgb.size() != frames[k].rgb8.rgb.size();
+    }
+    return m;
+}
+
+Classes check_case(const Backend& backend, const StressCase& c, const std::string& note, bool small_image) {
+    const std::vector<Frame> reference = reference_frames(c);
+    std::size_t reference_nonfinite = 0;
+    for (const Frame& f : reference) reference_nonfinite += count_nonfinite(f.image);
+    EXPECT_EQ(reference_nonfinite, 0u) << c.name << ": the double reference wrote non-finite values " << note;
+    const int width = c.path[0].intrinsics.width, height = c.path[0].intrinsics.height;
+    Classes classes;
+    for (const Config& cfg : backend.configs()) {
+        const std::vector<Frame> frames = backend.render(c, cfg);
+        const Measured m = measure(backend, frames, reference);
+        classes[backend.class_label(cfg)].merge(m);
+        const std::string what = c.name + ", " + backend.config_name(cfg) + ": " + describe(m) + " " + note;
+        expect_within(m, backend.bound_for(c.family, cfg), small_image, what);
+        if (m.rgb8_checked) {
+            EXPECT_EQ(m.rgb8_mismatch, 0u) << what;
+        }
+        for (const Frame& f : frames) {
+            EXPECT_EQ(f.image.width, width) << what;
+            EXPECT_EQ(f.image.rgb.size(), 3u * static_cast<std::size_t>(width) * static_cast<std::size_t>(height)) << what;
+        }
+    }
+    return classes;
+}
+
+void run_family(const Backend& backend, const FamilyGenerator& family) {
+    const std::uint64_t seed = test::fresh_seed(backend.suite() + " " + family.what);
+    const StressCase c = family.make(seed);
+    report(backend.suite(), c.name, check_case(backend, c, seed_note(seed), false));
+}
+
+// --- Property tests -------------------------------------------------------------------
+
+std::vector<LabelledCase> mixture_cases(std::uint64_t seed) {
+    std::vector<LabelledCase> out;
+    for (int k = 0; k < kMixtureSeeds; ++k) {
+        const bool hdr = k % 3 == 2;
+        out.push_back({mixture(seed + 1000003ull * static_cast<std::uint64_t>(k), 150, hdr),
+                       seed_note(seed) + " mixture " + std::to_string(k), hdr ? "hdr mixtures" : "mixtures"});
+    }
+    return out;
+}
+
+std::vector<LabelledCase> field_of_view_cases(std::uint64_t seed) {
+    std::vector<LabelledCase> out;
+    for (double fov : {5.0, 10.0, 30.0, 60.0, 90.0, 120.0, 150.0})
+        out.push_back({field_of_view(seed + static_cast<std::uint64_t>(fov), fov), seed_note(seed) + " fov " + std::to_string(fov),
+                       "fov 5..150"});
+    return out;
+}
+
+std::vector<LabelledCase> resolution_cases(std::uint64_t seed) {
+    std::vector<LabelledCase> out;
+    for (auto [w, h] : {std::pair{1, 1}, std::pair{1, 2}, std::pair{2, 1}, std::pair{1, 37}, std::pair{45, 1},
+                        std::pair{15, 17}, std::pair{16, 16}, std::pair{17, 17}, std::pair{255, 3}, std::pair{3, 129}}) {
+        StressCase c = mixture(seed + static_cast<std::uint64_t>(w * 1000 + h), 120);
+        c.path = sideways_path(test::forward_camera(w, h, 60));  // see mixture()
+        // Square pixels and a 60 degree horizontal field: 3 x 129 sees 175 degrees vertically,
+        // so the field-of-view bounds apply; on slivers PSNR and fractions say little.
+        c.family = Family::field_of_view;
+        out.push_back({std::move(c), seed_note(seed) + " " + std::to_string(w) + "x" + std::to_string(h),
+                       "resolutions 1x1..255x3", w * h < 256 || std::min(w, h) < 8});
+    }
+    return out;
+}
+
+void run_cases(const Backend& backend, const std::string& what, std::vector<LabelledCase> (*cases)(std::uint64_t)) {
+    const std::uint64_t seed = test::fresh_seed(backend.suite() + " " + what);
+    std::vector<std::pair<std::string, Classes>> groups;
+    for (const LabelledCase& lc : cases(seed)) {
+        auto group = std::find_if(groups.begin(), groups.end(), [&](const auto& g) { return g.first == lc.group; });
+        if (group == groups.end()) group = groups.emplace(groups.end(), lc.group, Classes{});
+        for (const auto& [name, m] : check_case(backend, lc.c, lc.note, lc.small_image)) group->second[name].merge(m);
+    }
+    for (const auto& [group, worst] : groups) report(backend.suite(), group, worst);
+}
+
+void measure_bounds(const Backend& backend) {
+    const char* env = std::getenv("CATGS_STRESS_SEEDS");
+    const int seeds = env ? std::atoi(env) : 20;
+    const std::uint64_t base = test::fresh_seed(backend.suite() + " measure");
+    Classes worst;
+    for (int s = 0; s < seeds; ++s) {
+        const std::uint64_t seed = base + static_cast<std::uint64_t>(s) * 7919;
+        std::vector<StressCase> cases = all_families(seed);
+        for (double fov : {5.0, 20.0, 90.0, 150.0}) cases.push_back(field_of_view(seed + static_cast<std::uint64_t>(fov), fov));
+        for (const StressCase& c : cases) {
+            const std::vector<Frame> reference = reference_frames(c);
+            const std::string family = family_name(c.family);
+            for (const Config& cfg : backend.configs()) {
+                Measured m = measure(backend, backend.render(c, cfg), reference);
+                for (const Frame& f : reference) m.nonfinite += count_nonfinite(f.image);
+                worst[family + " " + backend.class_label(cfg)].merge(m);
+                worst[family + " / " + backend.config_name(cfg)].merge(m);
+            }
+        }
+    }
+    for (const auto& [name, m] : worst) std::cout << "[measure] " << name << ": " << describe(m) << std::endl;
+}
+
+}  // namespace catgs::test::stress
