@@ -52,6 +52,7 @@ struct Options {
     long max_frames = -1;
     int threads = 0;
     bool quiet = false;
+    bool image_digests = false;
 };
 
 struct Series {
@@ -89,6 +90,16 @@ struct Result {
     std::uint64_t chunks = 0;
     nlohmann::json frames = nlohmann::json::array();
 };
+
+// FNV-1a, 64 bits, of the 8-bit image: enough to tell two renders apart when a change must
+// leave every pixel as it was (renderer/tools/gpu_regression.sh compares them).
+std::string image_digest(const catgs::ImageRGB8& image) {
+    std::uint64_t h = 14695981039346656037ull;
+    for (std::uint8_t byte : image.rgb) h = (h ^ byte) * 1099511628211ull;
+    char text[17];
+    std::snprintf(text, sizeof text, "%016llx", static_cast<unsigned long long>(h));
+    return text;
+}
 
 Result run_config(catgs::Renderer& renderer, const std::vector<catgs::Camera>& cameras, const Config& config,
                   const Options& o, const std::vector<catgs::ImageRGB8>& references) {
@@ -129,6 +140,7 @@ Result run_config(catgs::Renderer& renderer, const std::vector<catgs::Camera>& c
             frame["max_abs"] = e.max_abs;
             frame["fraction_over_one_level"] = e.fraction_over_one;
         }
+        if (o.image_digests) frame["image_digest"] = image_digest(image);
         r.frames.push_back(frame);
         if (!o.quiet && (f + 1) % std::max<std::size_t>(1, cameras.size() / 5) == 0)
             std::fprintf(stderr, "%s: %zu/%zu frames\n", config.name.c_str(), f + 1, cameras.size());
@@ -325,6 +337,9 @@ int main(int argc, char** argv) {
     app.add_option("--json-out", o.json_out, "write per-frame and summary results as JSON to this file");
     app.add_option("--csv-out", o.csv_out, "write one CSV row per configuration to this file");
     app.add_flag("--quiet", o.quiet, "no progress output on stderr");
+    app.add_flag("--image-digests", o.image_digests,
+                 "add each frame's image digest (FNV-1a of the 8-bit RGB) to --json-out, to check that a change "
+                 "leaves every image bit-identical");
     try {
         app.parse(argc, argv);
     } catch (const CLI::CallForHelp& e) {
