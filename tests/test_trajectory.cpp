@@ -11,7 +11,9 @@
 #include <nlohmann/json.hpp>
 
 #include "catgs/camera.hpp"
+#include "catgs/constants.hpp"
 #include "catgs/error.hpp"
+#include "catgs/host_vector.hpp"
 #include "catgs/trajectory.hpp"
 
 namespace {
@@ -20,9 +22,11 @@ using catgs::Bounds;
 using catgs::Camera;
 using catgs::Intrinsics;
 using catgs::Pose;
-using V3 = std::array<double, 3>;
-
-constexpr double kPi = 3.14159265358979323846;
+using catgs::cross;
+using catgs::distance;
+using catgs::dot;
+using catgs::kPi;
+using V3 = catgs::HostVec3;
 
 std::string temp_path(const std::string& name) {
     const std::filesystem::path dir = std::filesystem::path(CATGS_TEST_TMP) / "trajectory";
@@ -46,19 +50,13 @@ V3 to_camera(const Pose& p, const V3& x) {
 // Camera axis `row` (0 right, 1 down, 2 forward) in world coordinates: a row of R.
 V3 axis(const Pose& p, int row) { return {p.rotation[3 * row], p.rotation[3 * row + 1], p.rotation[3 * row + 2]}; }
 
-double dot(const V3& a, const V3& b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
-double distance(const V3& a, const V3& b) {
-    return std::sqrt((a[0] - b[0]) * (a[0] - b[0]) + (a[1] - b[1]) * (a[1] - b[1]) + (a[2] - b[2]) * (a[2] - b[2]));
-}
-
 void expect_rigid(const Pose& p, const std::string& what) {
     for (double v : p.rotation) ASSERT_TRUE(std::isfinite(v)) << what;
     for (double v : p.translation) ASSERT_TRUE(std::isfinite(v)) << what;
     for (int i = 0; i < 3; ++i)
         for (int j = 0; j < 3; ++j) ASSERT_NEAR(dot(axis(p, i), axis(p, j)), i == j ? 1.0 : 0.0, 1e-12) << what;
     const V3 x = axis(p, 0), y = axis(p, 1), z = axis(p, 2);
-    const V3 x_cross_y{x[1] * y[2] - x[2] * y[1], x[2] * y[0] - x[0] * y[2], x[0] * y[1] - x[1] * y[0]};
-    ASSERT_GT(dot(x_cross_y, z), 0.999) << what << ": not right-handed";
+    ASSERT_GT(dot(cross(x, y), z), 0.999) << what << ": not right-handed";
 }
 
 template <typename F>

@@ -6,9 +6,11 @@
 #include <array>
 #include <cmath>
 
+#include "catgs/host_vector.hpp"
+
 namespace catgs::detail {
 
-using V3 = std::array<double, 3>;
+using V3 = HostVec3;
 using M3 = std::array<double, 9>;  // row-major
 
 // Largest deviation of M^T M from the identity.

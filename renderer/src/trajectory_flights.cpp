@@ -22,13 +22,6 @@ namespace {
 using detail::orthonormality_error;
 using detail::V3;
 
-V3 operator+(const V3& a, const V3& b) { return {a[0] + b[0], a[1] + b[1], a[2] + b[2]}; }
-V3 operator*(double s, const V3& a) { return {s * a[0], s * a[1], s * a[2]}; }
-double dot(const V3& a, const V3& b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
-V3 cross(const V3& a, const V3& b) {
-    return {a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]};
-}
-
 double radians(double degrees) { return degrees * kPi / 180.0; }
 
 // Generated poses are orthonormal to rounding; anything worse is a bug.
