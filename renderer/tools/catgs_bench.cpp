@@ -176,6 +176,84 @@ void print_detail(const Result& r) {
     std::printf("\n");
 }
 
+std::vector<Config> make_configs(const Options& o) {
+    if (!o.sweep.empty()) return catgs::cli::parse_sweep(o.sweep);
+    Config c;
+    c.name = "single";
+    catgs::cli::apply_pipeline_flags(o.pipeline, c.options);
+    return {c};
+}
+
+// The reference: a per-frame render in double, no cache, no split, with exact culling (every
+// Gaussian at every pixel) or opacity-aware culling (which the tests show loses nothing
+// relative to exact, and is affordable for large scenes), every error_every frames.
+std::vector<catgs::ImageRGB8> render_references(const Options& o, const std::shared_ptr<catgs::Scene>& scene,
+                                                const std::vector<catgs::Camera>& cameras) {
+    std::vector<catgs::ImageRGB8> references;
+    if (o.reference == "none") return references;
+    auto ref = catgs::make_renderer(o.reference_backend.empty() ? o.backend : o.reference_backend,
+                                    catgs::Precision::double_, o.threads);
+    ref->set_scene(scene);
+    catgs::RenderOptions ro;
+    ro.culling = catgs::parse_culling(o.reference);
+    for (std::size_t f = 0; f < cameras.size(); f += static_cast<std::size_t>(o.error_every)) {
+        references.emplace_back();
+        ref->render_rgb8(cameras[f], ro, references.back());
+        if (!o.quiet) std::fprintf(stderr, "reference (%s, %s): frame %zu\n", ref->name().c_str(), o.reference.c_str(), f);
+    }
+    return references;
+}
+
+nlohmann::json result_json(const Result& r) {
+    nlohmann::json stages;
+    for (std::size_t k = 0; k < kRenderStages; ++k)
+        stages[std::string(catgs::stage_name(catgs::kStages[k]))] = stats_json(r.stages[k]);
+    stages["total"] = stats_json(r.total);
+    return {{"name", r.name},
+            {"pipeline", r.pipeline},
+            {"stages_ms", stages},
+            {"key_total_ms", stats_json(r.key_total)},
+            {"cached_total_ms", stats_json(r.cached_total)},
+            {"pairs", stats_json(r.pairs)},
+            {"visible", stats_json(r.visible)},
+            {"chunks", r.chunks},
+            {"chunks_culled", stats_json(r.chunks_culled)},
+            {"window", stats_json(r.window)},
+            {"split_tasks", stats_json(r.splits)},
+            {"peak_arena_bytes", r.arena.max()},
+            {"psnr_mean", r.psnr.mean()},
+            {"psnr_worst", r.psnr.min()},
+            {"max_abs", r.max_abs.max()},
+            {"fraction_over_one_level", r.over_one.max()},
+            {"frames", r.frames}};
+}
+
+// One row per configuration on stdout and in --csv-out.
+void print_summary(const Options& o, const std::vector<Result>& results) {
+    std::printf("\n%-22s %9s %9s %9s %9s %9s %10s %8s %8s %6s %5s\n", "configuration", "median", "p90", "max", "key med",
+                "cach med", "pairs med", "PSNR", "worst", "max", "W med");
+    std::ofstream csv;
+    if (!o.csv_out.empty()) {
+        csv.open(o.csv_out);
+        if (!csv) throw catgs::Error("--csv-out '" + o.csv_out + "': cannot open for writing");
+        csv << "name,pipeline,median_ms,p90_ms,max_ms,key_median_ms,cached_median_ms,key_frames,cached_frames,"
+               "pairs_median,psnr_mean,psnr_worst,max_abs,fraction_over_one_level,window_median\n";
+    }
+    for (const Result& r : results) {
+        const Series& total = r.total;
+        std::printf("%-22s %9.3f %9.3f %9.3f %9.3f %9.3f %10.0f %8.2f %8.2f %6.0f %5.0f\n", r.name.c_str(),
+                    total.percentile(0.5), total.percentile(0.9), total.max(), r.key_total.percentile(0.5),
+                    r.cached_total.percentile(0.5), r.pairs.percentile(0.5), r.psnr.mean(), r.psnr.min(),
+                    r.max_abs.max(), r.window.percentile(0.5));
+        if (csv)
+            csv << r.name << ",\"" << r.pipeline << "\"," << total.percentile(0.5) << "," << total.percentile(0.9) << ","
+                << total.max() << "," << r.key_total.percentile(0.5) << "," << r.cached_total.percentile(0.5) << ","
+                << r.key_total.values.size() << "," << r.cached_total.values.size() << "," << r.pairs.percentile(0.5)
+                << "," << r.psnr.mean() << "," << r.psnr.min() << "," << r.max_abs.max() << "," << r.over_one.max()
+                << "," << r.window.percentile(0.5) << "\n";
+    }
+}
+
 int run(const Options& o) {
     const catgs::Precision precision = catgs::parse_precision(o.precision);
     const auto [grid_x, grid_y] = catgs::parse_grid(o.grid);
@@ -184,15 +262,7 @@ int run(const Options& o) {
     if (o.error_every < 1) throw catgs::Error("--error-every must be >= 1");
     if (o.reference != "none" && o.reference != "exact" && o.reference != "opacity-aware")
         throw catgs::Error("--reference '" + o.reference + "': expected none, exact or opacity-aware");
-    std::vector<Config> configs;
-    if (o.sweep.empty()) {
-        Config c;
-        c.name = "single";
-        catgs::cli::apply_pipeline_flags(o.pipeline, c.options);
-        configs.push_back(c);
-    } else {
-        configs = catgs::cli::parse_sweep(o.sweep);
-    }
+    const std::vector<Config> configs = make_configs(o);
 
     catgs::LoadOptions load;
     load.progress = catgs::stderr_progress(!o.quiet);
@@ -211,23 +281,7 @@ int run(const Options& o) {
     std::printf("scene: %s\nrenderer: %s, %dx%d, %zu frames, %d warm-up renders, %zu configuration(s)\n",
                 catgs::describe(*scene).c_str(), renderer->name().c_str(), cameras[0].intrinsics.width,
                 cameras[0].intrinsics.height, cameras.size(), o.warmup, configs.size());
-
-    // The reference: a per-frame render in double, no cache, no split, with exact culling
-    // (every Gaussian at every pixel) or opacity-aware culling (which the tests show loses
-    // nothing relative to exact, and is affordable for large scenes), every error_every frames.
-    std::vector<catgs::ImageRGB8> references;
-    if (o.reference != "none") {
-        auto ref = catgs::make_renderer(o.reference_backend.empty() ? o.backend : o.reference_backend,
-                                        catgs::Precision::double_, o.threads);
-        ref->set_scene(scene);
-        catgs::RenderOptions ro;
-        ro.culling = catgs::parse_culling(o.reference);
-        for (std::size_t f = 0; f < cameras.size(); f += static_cast<std::size_t>(o.error_every)) {
-            references.emplace_back();
-            ref->render_rgb8(cameras[f], ro, references.back());
-            if (!o.quiet) std::fprintf(stderr, "reference (%s, %s): frame %zu\n", ref->name().c_str(), o.reference.c_str(), f);
-        }
-    }
+    const std::vector<catgs::ImageRGB8> references = render_references(o, scene, cameras);
     std::fflush(stdout);
 
     std::vector<Result> results;
@@ -236,53 +290,10 @@ int run(const Options& o) {
         print_detail(results.back());
         std::fflush(stdout);
     }
-
-    // Summary: one row per configuration.
-    std::printf("\n%-22s %9s %9s %9s %9s %9s %10s %8s %8s %6s %5s\n", "configuration", "median", "p90", "max", "key med",
-                "cach med", "pairs med", "PSNR", "worst", "max", "W med");
-    std::ofstream csv;
-    if (!o.csv_out.empty()) {
-        csv.open(o.csv_out);
-        if (!csv) throw catgs::Error("--csv-out '" + o.csv_out + "': cannot open for writing");
-        csv << "name,pipeline,median_ms,p90_ms,max_ms,key_median_ms,cached_median_ms,key_frames,cached_frames,"
-               "pairs_median,psnr_mean,psnr_worst,max_abs,fraction_over_one_level,window_median\n";
-    }
-    nlohmann::json doc_results = nlohmann::json::array();
-    for (const Result& r : results) {
-        const Series& total = r.total;
-        std::printf("%-22s %9.3f %9.3f %9.3f %9.3f %9.3f %10.0f %8.2f %8.2f %6.0f %5.0f\n", r.name.c_str(),
-                    total.percentile(0.5), total.percentile(0.9), total.max(), r.key_total.percentile(0.5),
-                    r.cached_total.percentile(0.5), r.pairs.percentile(0.5), r.psnr.mean(), r.psnr.min(),
-                    r.max_abs.max(), r.window.percentile(0.5));
-        if (csv)
-            csv << r.name << ",\"" << r.pipeline << "\"," << total.percentile(0.5) << "," << total.percentile(0.9) << ","
-                << total.max() << "," << r.key_total.percentile(0.5) << "," << r.cached_total.percentile(0.5) << ","
-                << r.key_total.values.size() << "," << r.cached_total.values.size() << "," << r.pairs.percentile(0.5)
-                << "," << r.psnr.mean() << "," << r.psnr.min() << "," << r.max_abs.max() << "," << r.over_one.max()
-                << "," << r.window.percentile(0.5) << "\n";
-        nlohmann::json stages;
-        for (std::size_t k = 0; k < kRenderStages; ++k)
-            stages[std::string(catgs::stage_name(catgs::kStages[k]))] = stats_json(r.stages[k]);
-        stages["total"] = stats_json(r.total);
-        doc_results.push_back({{"name", r.name},
-                               {"pipeline", r.pipeline},
-                               {"stages_ms", stages},
-                               {"key_total_ms", stats_json(r.key_total)},
-                               {"cached_total_ms", stats_json(r.cached_total)},
-                               {"pairs", stats_json(r.pairs)},
-                               {"visible", stats_json(r.visible)},
-                               {"chunks", r.chunks},
-                               {"chunks_culled", stats_json(r.chunks_culled)},
-                               {"window", stats_json(r.window)},
-                               {"split_tasks", stats_json(r.splits)},
-                               {"peak_arena_bytes", r.arena.max()},
-                               {"psnr_mean", r.psnr.mean()},
-                               {"psnr_worst", r.psnr.min()},
-                               {"max_abs", r.max_abs.max()},
-                               {"fraction_over_one_level", r.over_one.max()},
-                               {"frames", r.frames}});
-    }
+    print_summary(o, results);
     if (!o.json_out.empty()) {
+        nlohmann::json doc_results = nlohmann::json::array();
+        for (const Result& r : results) doc_results.push_back(result_json(r));
         nlohmann::json doc{{"scene", nlohmann::json::parse(catgs::describe_json(*scene))},
                            {"scene_spec", o.scene},
                            {"grid", o.grid},
