@@ -8,10 +8,8 @@
 // StressBugs, the tests of the renderer bugs this suite found. The CUDA part is
 // tests/gpu/test_cuda_stress.cpp; the bounds are each backend's own.
 //
-// Bugs 1, 2, 3b and 4 of StressBugs are fixed in b131577; bugs 3 and 5 are open as of
-// 0aaf544, so those two tests fail, and so do the family and property tests whose inputs
-// reach them (huge_scales, degenerate, the mixtures, field of view). The bounds are the ones
-// measured with the fixes for 3 and 5 (the suite's report) applied.
+// Every bug of StressBugs is fixed (b131577 and after) and its test passes; the bounds are
+// the ones measured with the fixes in.
 #include <gtest/gtest.h>
 
 #include <algorithm>
