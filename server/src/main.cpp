@@ -73,7 +73,11 @@ int main(int argc, char** argv) {
                    "(0: no limit)")
         ->capture_default_str();
     app.add_option("--stall-timeout-ms", o.limits.stall_timeout_ms,
-                   "cancel a stream whose client has not read a frame for this long (0: never)")
+                   "cancel a stream whose client has not read a frame for this long, DEADLINE_EXCEEDED (0: never)")
+        ->capture_default_str();
+    app.add_option("--open-timeout-ms", o.limits.open_timeout_ms,
+                   "finish a stream that has not sent its opening message this long after it started, "
+                   "DEADLINE_EXCEEDED (0: never)")
         ->capture_default_str();
     app.add_option("--tls-cert", o.tls_cert_file, "PEM certificate chain (with --tls-key: serve TLS)");
     app.add_option("--tls-key", o.tls_key_file, "PEM private key");
@@ -83,7 +87,12 @@ int main(int argc, char** argv) {
                    "(health checks stay open)");
     app.add_flag("--no-reflection", no_reflection,
                  "do not serve gRPC server reflection (it is always off with --token-file)");
-    app.add_option("--shutdown-grace-ms", o.shutdown_grace_ms, "on SIGTERM/SIGINT, time given to running calls")
+    app.add_option("--drain-ms", o.drain_ms,
+                   "on SIGTERM/SIGINT: health turns NOT_SERVING and open streams are told to reconnect at once; the "
+                   "listeners stay open this long, refusing new sessions with UNAVAILABLE, before the server stops")
+        ->capture_default_str();
+    app.add_option("--shutdown-grace-ms", o.shutdown_grace_ms,
+                   "after the drain, time given to unary calls still running before they are cancelled")
         ->capture_default_str();
     app.add_option("--log-level", log_level, "trace, debug, info, warn, error")->capture_default_str();
     try {
@@ -116,6 +125,9 @@ int main(int argc, char** argv) {
         o.limits.max_session_bytes = max_session_mb * kMiB;
         if (!(o.limits.max_pose_rate >= 0)) throw catgs::Error("--max-pose-rate must be >= 0");
         if (o.limits.stall_timeout_ms < 0) throw catgs::Error("--stall-timeout-ms must be >= 0");
+        if (o.limits.open_timeout_ms < 0) throw catgs::Error("--open-timeout-ms must be >= 0");
+        if (o.drain_ms < 0 || o.shutdown_grace_ms < 0)
+            throw catgs::Error("--drain-ms/--shutdown-grace-ms must be >= 0");
         if (!token_file.empty()) o.bearer_token = catgs::read_token(token_file);
         o.reflection = !no_reflection;
         if (o.limits.max_sessions < 1) throw catgs::Error("--max-sessions must be >= 1");
@@ -141,7 +153,7 @@ int main(int argc, char** argv) {
         int signal = 0;
         sigwait(&signals, &signal);
         spdlog::info("received {}", signal == SIGTERM ? "SIGTERM" : "SIGINT");
-        server->shutdown(std::chrono::milliseconds(o.shutdown_grace_ms));
+        server->drain_and_shutdown();
     });
     server->wait();
     waiter.join();

@@ -1,7 +1,11 @@
 #include "catgs/server/request_validation.hpp"
 
+#include <google/protobuf/descriptor.h>
+#include <google/protobuf/message.h>
+
 #include <cmath>
 #include <sstream>
+#include <vector>
 
 #include "catgs/common/pose_wire.hpp"
 #include "catgs/error.hpp"
@@ -38,7 +42,42 @@ grpc::Status check_pose(const v1::Pose& pose, const std::string& field) {
     return grpc::Status::OK;
 }
 
+namespace pb = google::protobuf;
+
+grpc::Status unknown_enum_value(const std::string& field, const pb::EnumDescriptor& type, int value) {
+    std::string known;
+    for (int i = 0; i < type.value_count(); ++i)
+        known += (i ? ", " : "") + std::to_string(type.value(i)->number()) + " " + type.value(i)->name();
+    return invalid(field, "unknown value " + std::to_string(value) + " of " + type.full_name() + " (known: " + known + ")");
+}
+
 }  // namespace
+
+grpc::Status check_enum_values(const pb::Message& message, const std::string& prefix) {
+    const pb::Reflection& reflection = *message.GetReflection();
+    std::vector<const pb::FieldDescriptor*> fields;
+    reflection.ListFields(message, &fields);  // the fields set; an unset enum holds 0, always defined
+    const std::string dot = prefix.empty() ? "" : prefix + ".";
+    for (const pb::FieldDescriptor* field : fields) {
+        const std::string path = dot + field->name();
+        const bool repeated = field->is_repeated();
+        const int count = repeated ? reflection.FieldSize(message, field) : 1;
+        for (int i = 0; i < count; ++i) {
+            const std::string element = repeated ? path + "[" + std::to_string(i) + "]" : path;
+            if (field->cpp_type() == pb::FieldDescriptor::CPPTYPE_ENUM) {
+                const int value = repeated ? reflection.GetRepeatedEnumValue(message, field, i)
+                                           : reflection.GetEnumValue(message, field);
+                if (!field->enum_type()->FindValueByNumber(value))
+                    return unknown_enum_value(element, *field->enum_type(), value);
+            } else if (field->cpp_type() == pb::FieldDescriptor::CPPTYPE_MESSAGE) {
+                const pb::Message& child =
+                    repeated ? reflection.GetRepeatedMessage(message, field, i) : reflection.GetMessage(message, field);
+                if (grpc::Status s = check_enum_values(child, element); !s.ok()) return s;
+            }
+        }
+    }
+    return grpc::Status::OK;
+}
 
 RenderOptions render_options_for(const v1::PipelineOptions& p, const v1::Color* background) {
     // Unset fields take the defaults every tool shares (default_pipeline_options: the fastest
@@ -84,6 +123,7 @@ RenderOptions render_options_for(const v1::PipelineOptions& p, const v1::Color* 
 
 grpc::Status parse_session_config(const v1::SessionConfig& config, const Limits& limits, const std::string& prefix,
                                   SessionSetup* out) {
+    if (grpc::Status s = check_enum_values(config, prefix); !s.ok()) return s;
     const std::string f = prefix + ".";
     if (config.scene_id().empty()) return invalid(f + "scene_id", "empty");
     for (const auto& [name, value] : {std::pair{"width", config.width()}, std::pair{"height", config.height()}})
@@ -128,7 +168,7 @@ grpc::Status parse_session_config(const v1::SessionConfig& config, const Limits&
     case v1::ENCODING_JPEG: e.format = Format::jpeg; break;
     case v1::ENCODING_PNG: e.format = Format::png; break;
     case v1::ENCODING_RAW_RGB8: e.format = Format::raw_rgb8; break;
-    default: return invalid(f + "encoding.encoding", "unknown value " + std::to_string(enc.encoding()));
+    default: return invalid(f + "encoding.encoding", "unknown value " + std::to_string(enc.encoding()));  // not reached: checked above
     }
     if (enc.jpeg_quality() < 0 || enc.jpeg_quality() > 100)
         return invalid(f + "encoding.jpeg_quality", std::to_string(enc.jpeg_quality()) + " is outside 1..100 (0: default)");
@@ -179,6 +219,7 @@ Camera camera_from_pose(const v1::Pose& pose, const Intrinsics& intrinsics, std:
 
 grpc::Status parse_frame_request(const v1::FrameRequest& request, const Intrinsics& intrinsics,
                                  const std::string& prefix, FrameSetup* out) {
+    if (grpc::Status s = check_enum_values(request, prefix); !s.ok()) return s;
     const std::string f = prefix + ".";
     if (!request.has_pose()) return invalid(f + "pose", "missing");
     if (grpc::Status s = check_pose(request.pose(), f + "pose"); !s.ok()) return s;

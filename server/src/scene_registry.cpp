@@ -76,7 +76,7 @@ SceneRegistry::SceneRegistry(std::string scene_root, std::uint64_t max_scene_byt
     : state_(std::make_shared<Lease::State>()), scene_root_(std::move(scene_root)), max_scene_bytes_(max_scene_bytes) {}
 
 bool valid_scene_id(const std::string& id) {
-    if (id.empty() || id.size() > kMaxSceneIdLength) return false;
+    if (id.empty() || id.size() > kMaxSceneIdLength || id == "." || id == "..") return false;
     for (char c : id)
         if (!(std::isalnum(static_cast<unsigned char>(c)) || c == '.' || c == '_' || c == '-')) return false;
     return true;
@@ -124,6 +124,10 @@ grpc::Status SceneRegistry::load(const std::string& requested_id, const std::str
     if (source.find('\0') != std::string::npos)
         return {grpc::StatusCode::INVALID_ARGUMENT, "source: contains a NUL byte"};
     const std::string id = requested_id.empty() ? default_scene_id(source) : requested_id;
+    if (id == "." || id == "..")
+        // Ids end up in paths and URLs of tools and logs, where these two name directories.
+        return {grpc::StatusCode::INVALID_ARGUMENT,
+                "scene_id '" + id + "': '.' and '..' are not scene ids (they name directories); choose another id"};
     if (!valid_scene_id(id))
         return {grpc::StatusCode::INVALID_ARGUMENT,
                 "scene_id '" + id + "': expected 1..128 characters of letters, digits, '.', '_' or '-'"};

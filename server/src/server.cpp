@@ -6,8 +6,10 @@
 #include <grpcpp/impl/server_builder_option.h>
 #include <spdlog/spdlog.h>
 
+#include <algorithm>
 #include <fstream>
 #include <sstream>
+#include <thread>
 
 #include "catgs/common/files.hpp"
 #include "catgs/error.hpp"
@@ -63,6 +65,23 @@ public:
         return new Reactor(context->method());
     }
 };
+
+/// How long a drained stream's frame in flight may take to reach a reading client; a stream
+/// still open after that has a client that does not read, and is cancelled.
+constexpr std::chrono::milliseconds kDrainWriteWait{1000};
+/// How long the cancels of those streams may take to complete.
+constexpr std::chrono::milliseconds kCancelWait{1000};
+
+/// Polls `done` every 10 ms until it holds or `wait` has passed.
+template <typename Done>
+bool wait_until(Done done, std::chrono::milliseconds wait) {
+    const auto end = std::chrono::steady_clock::now() + wait;
+    while (!done()) {
+        if (std::chrono::steady_clock::now() >= end) return false;
+        std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    }
+    return true;
+}
 
 /// Service names whose health is reported (plus "", the whole server).
 const char* const kServiceNames[] = {"catgs.v1.RenderService", "catgs.v1.SceneService"};
@@ -164,8 +183,10 @@ void Server::shutdown(std::chrono::milliseconds grace) {
         std::lock_guard lock(mutex_);
         if (stopped_) return;
     }
+    end_streams(std::min(grace, kDrainWriteWait));
     const auto deadline = std::chrono::system_clock::now() + grace;
-    // Streams were finished above; unary calls (scene loads, renders) get until the deadline.
+    // Streams have ended above; unary calls (scene loads, renders) get until the deadline, and
+    // so do clients to close their connections after gRPC's GOAWAY.
     if (server_) server_->Shutdown(deadline);
     core_->stop_workers();
     if (health_server_) health_server_->Shutdown(std::chrono::system_clock::now());
@@ -175,6 +196,27 @@ void Server::shutdown(std::chrono::milliseconds grace) {
     }
     stopped_cv_.notify_all();
     spdlog::info("shut down");
+}
+
+void Server::drain_and_shutdown() {
+    const auto drain = std::chrono::milliseconds(core_->options().drain_ms);
+    const auto drained = std::chrono::steady_clock::now() + drain;
+    begin_shutdown();
+    spdlog::info("draining for {} ms: the listeners stay open, new sessions are refused", drain.count());
+    end_streams(kDrainWriteWait);
+    std::this_thread::sleep_until(drained);
+    shutdown(std::chrono::milliseconds(core_->options().shutdown_grace_ms));
+}
+
+void Server::end_streams(std::chrono::milliseconds wait) {
+    auto all_ended = [this] { return core_->streams().empty(); };
+    if (wait_until(all_ended, wait)) return;
+    const auto left = core_->streams();
+    spdlog::info("cancelling {} stream(s) whose client does not read, with the shutdown status", left.size());
+    for (const auto& session : left) session->cancel(shutting_down_status());
+    // Their trailers must be on the wire before the server closes the connections.
+    if (!wait_until(all_ended, kCancelWait))
+        spdlog::warn("{} stream(s) still open after their cancel", core_->streams().size());
 }
 
 void Server::wait() {

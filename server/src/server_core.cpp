@@ -32,7 +32,8 @@ ServerCore::ServerCore(ServerOptions options)
       encode_pool_("encode", options_.encode_workers),
       admin_pool_("scene-load", 1) {
     scenes_.set_on_freed([this](const Scene* scene) { drop_pooled(scene); });
-    if (options_.limits.stall_timeout_ms > 0) watchdog_ = std::thread([this] { watchdog(); });
+    if (options_.limits.stall_timeout_ms > 0 || options_.limits.open_timeout_ms > 0)
+        watchdog_ = std::thread([this] { watchdog(); });
 }
 
 ServerCore::~ServerCore() {
@@ -110,17 +111,25 @@ void ServerCore::drop_pooled(const Scene* scene) {
     }
 }
 
-// The stall watchdog: a stream whose frame has sat in gRPC's hands longer than the stall
-// timeout belongs to a client that stopped reading; cancelling it frees the session.
+// The watchdog: a stream whose frame has sat in gRPC's hands longer than the stall timeout
+// belongs to a client that stopped reading, one without its opening message after the open
+// timeout to a client that never meant to open; ending them frees their resources. It wakes
+// every 1/20 of the shorter timeout, so each fires at most 5% late (plus scheduling).
 void ServerCore::watchdog() {
-    const auto timeout = std::chrono::milliseconds(options_.limits.stall_timeout_ms);
-    const auto period = std::clamp(timeout / 4, std::chrono::milliseconds(20), std::chrono::milliseconds(1000));
+    using std::chrono::milliseconds;
+    const milliseconds stall(options_.limits.stall_timeout_ms), open(options_.limits.open_timeout_ms);
+    const milliseconds shortest = stall.count() > 0 && open.count() > 0 ? std::min(stall, open)
+                                  : stall.count() > 0                   ? stall
+                                                                        : open;
+    const auto period = std::clamp(shortest / 20, milliseconds(5), milliseconds(1000));
     std::unique_lock lock(watchdog_mutex_);
     while (!watchdog_wake_.wait_for(lock, period, [this] { return watchdog_stop_; })) {
         lock.unlock();
         const auto now = std::chrono::steady_clock::now();
-        for (const auto& session : streams())
-            if (session->cancel_if_stalled(now, timeout)) counters_.streams_stalled++;
+        for (const auto& session : streams()) {
+            if (stall.count() > 0 && session->cancel_if_stalled(now, stall)) counters_.streams_stalled++;
+            if (open.count() > 0 && session->finish_if_not_opened(now, open)) counters_.open_timeouts++;
+        }
         lock.lock();
     }
 }
@@ -162,6 +171,7 @@ ServerStats ServerCore::stats() const {
     s.bytes_buffered = counters_.bytes_buffered;
     s.peak_session_buffered = counters_.peak_session_buffered;
     s.streams_stalled = counters_.streams_stalled;
+    s.open_timeouts = counters_.open_timeouts;
     s.reads_delayed = counters_.reads_delayed;
     s.out_of_memory = counters_.out_of_memory;
     {

@@ -5,6 +5,7 @@
 #include <chrono>
 
 #include "catgs/server/frame_messages.hpp"
+#include "catgs/server/request_validation.hpp"
 #include "catgs/server/stream_session.hpp"
 #include "catgs/server/wire.hpp"
 
@@ -17,6 +18,14 @@ grpc::ServerUnaryReactor* finish_now(grpc::CallbackServerContext* context, const
     grpc::ServerUnaryReactor* reactor = context->DefaultReactor();
     reactor->Finish(status);
     return reactor;
+}
+
+/// A unary request: the bytes parsed (malformed_request when they are not a `Message`) and
+/// every enum field checked against its descriptor, whatever the method.
+template <typename Message>
+grpc::Status parse_request(const grpc::ByteBuffer& in, Message* out) {
+    if (!parse_message(in, out)) return malformed_request(Message::descriptor()->name(), in);
+    return check_enum_values(*out, "");
 }
 
 }  // namespace
@@ -32,7 +41,7 @@ grpc::ServerUnaryReactor* RenderServiceImpl::Render(grpc::CallbackServerContext*
                                                     const grpc::ByteBuffer* request_bytes, grpc::ByteBuffer* response) {
     if (grpc::Status auth = core_.authorize(context); !auth.ok()) return finish_now(context, auth);
     v1::RenderRequest request;
-    if (!parse_message(*request_bytes, &request)) return finish_now(context, malformed_request("RenderRequest", *request_bytes));
+    if (grpc::Status parsed = parse_request(*request_bytes, &request); !parsed.ok()) return finish_now(context, parsed);
     // Everything one render needs, kept alive until it finishes.
     struct Job {
         SessionSetup setup;
@@ -81,8 +90,8 @@ grpc::ServerUnaryReactor* RenderServiceImpl::Render(grpc::CallbackServerContext*
                                         {job->received, begin, Clock::now()});
         const bool encoding = core.encode_pool().post([job, reactor, response] {
             v1::Frame& out = job->frame_out;
-            if (grpc::Status status = encode_frame(job->image, job->setup.encode, job->received, out); !status.ok()) {
-                reactor->Finish(status);
+            if (grpc::Status encoded = encode_frame(job->image, job->setup.encode, job->received, out); !encoded.ok()) {
+                reactor->Finish(encoded);
                 return;
             }
             out.mutable_stats()->set_frames_sent(1);
@@ -120,8 +129,8 @@ grpc::ServerUnaryReactor* SceneServiceImpl::LoadScene(grpc::CallbackServerContex
                                                       const grpc::ByteBuffer* request_bytes, grpc::ByteBuffer* response) {
     if (grpc::Status auth = core_.authorize(context); !auth.ok()) return finish_now(context, auth);
     auto request = std::make_shared<v1::LoadSceneRequest>();
-    if (!parse_message(*request_bytes, request.get()))
-        return finish_now(context, malformed_request("LoadSceneRequest", *request_bytes));
+    if (grpc::Status parsed = parse_request(*request_bytes, request.get()); !parsed.ok())
+        return finish_now(context, parsed);
     if (core_.admission().draining()) return finish_now(context, shutting_down_status());
     grpc::ServerUnaryReactor* reactor = context->DefaultReactor();
     // Loading reads and validates a whole file (seconds for big scenes): off the gRPC threads.
@@ -147,8 +156,7 @@ grpc::ServerUnaryReactor* SceneServiceImpl::ListScenes(grpc::CallbackServerConte
                                                        const grpc::ByteBuffer* request_bytes, grpc::ByteBuffer* response) {
     if (grpc::Status auth = core_.authorize(context); !auth.ok()) return finish_now(context, auth);
     v1::ListScenesRequest request;
-    if (!parse_message(*request_bytes, &request))
-        return finish_now(context, malformed_request("ListScenesRequest", *request_bytes));
+    if (grpc::Status parsed = parse_request(*request_bytes, &request); !parsed.ok()) return finish_now(context, parsed);
     v1::ListScenesResponse list;
     for (const SceneSummary& s : core_.scenes().list()) fill(s, list.add_scenes());
     serialize_message(list, response);
@@ -159,8 +167,7 @@ grpc::ServerUnaryReactor* SceneServiceImpl::UnloadScene(grpc::CallbackServerCont
                                                         const grpc::ByteBuffer* request_bytes, grpc::ByteBuffer* response) {
     if (grpc::Status auth = core_.authorize(context); !auth.ok()) return finish_now(context, auth);
     v1::UnloadSceneRequest request;
-    if (!parse_message(*request_bytes, &request))
-        return finish_now(context, malformed_request("UnloadSceneRequest", *request_bytes));
+    if (grpc::Status parsed = parse_request(*request_bytes, &request); !parsed.ok()) return finish_now(context, parsed);
     SceneSummary summary;
     bool freed = false;
     grpc::Status status = core_.scenes().unload(request.scene_id(), &summary, &freed);
@@ -177,8 +184,7 @@ grpc::ServerUnaryReactor* SceneServiceImpl::GetScene(grpc::CallbackServerContext
                                                      const grpc::ByteBuffer* request_bytes, grpc::ByteBuffer* response) {
     if (grpc::Status auth = core_.authorize(context); !auth.ok()) return finish_now(context, auth);
     v1::GetSceneRequest request;
-    if (!parse_message(*request_bytes, &request))
-        return finish_now(context, malformed_request("GetSceneRequest", *request_bytes));
+    if (grpc::Status parsed = parse_request(*request_bytes, &request); !parsed.ok()) return finish_now(context, parsed);
     SceneSummary summary;
     grpc::Status status = core_.scenes().get(request.scene_id(), &summary);
     if (status.ok()) {

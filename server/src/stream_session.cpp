@@ -2,6 +2,7 @@
 // cancel and the step planner. The workers' side is in stream_session_render.cpp.
 #include "catgs/server/stream_session.hpp"
 
+#include <grpc/grpc.h>
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
@@ -91,15 +92,17 @@ void StreamSession::OnReadDone(bool ok) {
                 // trust; later messages of this stream cannot be trusted either.
                 request_finish_locked(malformed_request("StreamRequest", request_buffer_));
             } else if (phase_ == Phase::awaiting_open) {
-                if (request_.has_open())
-                    handle_open(request_.open());
-                else
+                if (!request_.has_open())
                     request_finish_locked({grpc::StatusCode::INVALID_ARGUMENT,
                                            std::string("open: the first message of a stream must be StreamRequest.open, "
                                                        "got ") + kind_name(request_)});
+                else if (grpc::Status fields = check_enum_values(request_, ""); !fields.ok())
+                    request_finish_locked(fields);
+                else
+                    handle_open(request_.open());
             } else {
                 if (request_.has_frame()) {
-                    handle_frame(request_.frame());
+                    handle_frame(request_.frame(), check_enum_values(request_, ""));
                 } else {
                     ++stats_.requests_received;
                     error_frame_locked(0, {grpc::StatusCode::INVALID_ARGUMENT,
@@ -112,6 +115,7 @@ void StreamSession::OnReadDone(bool ok) {
             if (read_again && delay > Clock::duration::zero()) {
                 read_again = false;
                 postpone = under_way_.postponed_read = true;
+                ++stats_.frame_requests_delayed;
             }
         }
         request_buffer_.Clear();
@@ -160,32 +164,69 @@ void StreamSession::on_read_alarm() {
     run(actions);
 }
 
-bool StreamSession::cancel_if_stalled(Clock::time_point now, std::chrono::milliseconds timeout) {
-    double stalled_ms = 0;
+void StreamSession::cancel(const grpc::Status& status) {
+    grpc::Status decided;
     {
         std::lock_guard lock(mutex_);
-        if (phase_ == Phase::finished || under_way_.watchdog_cancel || !under_way_.write ||
-            now - write_started_ <= timeout)
+        if (phase_ == Phase::finished || under_way_.cancel) return;
+        request_finish_locked(status);
+        decided = finish_status_;
+        under_way_.cancel = true;  // Finish waits: the call stays alive for cancel_call
+    }
+    cancel_call(decided);
+}
+
+bool StreamSession::cancel_if_stalled(Clock::time_point now, std::chrono::milliseconds timeout) {
+    double stalled_ms = 0;
+    grpc::Status decided;
+    {
+        std::lock_guard lock(mutex_);
+        if (phase_ == Phase::finished || under_way_.cancel || !under_way_.write || now - write_started_ <= timeout)
             return false;
         stalled_ms = std::chrono::duration<double, std::milli>(now - write_started_).count();
-        // Finish waits for the cancel: the call stays alive for TryCancel below.
-        under_way_.watchdog_cancel = true;
         request_finish_locked({grpc::StatusCode::DEADLINE_EXCEEDED,
                                "stall-timeout: the client took no frame off the wire for " +
-                                   std::to_string(static_cast<long>(stalled_ms)) + " ms"});
+                                   std::to_string(static_cast<long>(stalled_ms)) + " ms (limit " +
+                                   std::to_string(timeout.count()) + " ms)"});
+        decided = finish_status_;
+        under_way_.cancel = true;
     }
     spdlog::warn("session {} ({}): a frame has waited {:.0f} ms for the client to read it; cancelling the stream "
                  "(stall watchdog)",
                  id_, peer_, stalled_ms);
-    // Trailers cannot pass a stream the client does not read: cancelling (RST_STREAM) is the
-    // only way to end it. The pending write then completes with ok = false.
-    context_->TryCancel();
+    cancel_call(decided);
+    return true;
+}
+
+void StreamSession::cancel_call(const grpc::Status& status) {
+    // Finish would queue the trailers behind the frame stuck in flow control, where they never
+    // pass a client that does not read. A cancel carrying a status makes gRPC's HTTP/2
+    // transport send the trailers (status and message) at once, ahead of the stream's data and
+    // outside its flow-control window, then RST_STREAM. The pending write then completes with
+    // ok = false and Finish follows; the status it sends no longer reaches the wire.
+    grpc_call_cancel_with_status(context_->c_call(), static_cast<grpc_status_code>(status.error_code()),
+                                 status.error_message().c_str(), nullptr);
     Actions actions;
     {
         std::lock_guard lock(mutex_);
-        under_way_.watchdog_cancel = false;
+        under_way_.cancel = false;
         plan_locked(actions);
     }
+    run(actions);
+}
+
+bool StreamSession::finish_if_not_opened(Clock::time_point now, std::chrono::milliseconds timeout) {
+    Actions actions;
+    {
+        std::lock_guard lock(mutex_);
+        if (phase_ != Phase::awaiting_open || now - started_ <= timeout) return false;
+        // No write is under way before the session opens: Finish's trailers leave at once.
+        request_finish_locked({grpc::StatusCode::DEADLINE_EXCEEDED,
+                               "open-timeout: no opening message (StreamRequest.open) within " +
+                                   std::to_string(timeout.count()) + " ms of the call's start"});
+        plan_locked(actions);
+    }
+    spdlog::info("session {} ({}): no opening message within {} ms; finishing the call", id_, peer_, timeout.count());
     run(actions);
     return true;
 }
@@ -208,7 +249,7 @@ void StreamSession::handle_open(const v1::SessionConfig& config) {
 }
 
 // mutex_ held.
-void StreamSession::handle_frame(const v1::FrameRequest& request) {
+void StreamSession::handle_frame(const v1::FrameRequest& request, const grpc::Status& enum_values) {
     ++stats_.requests_received;
     // The acknowledgement counts even when the rest of the request is bad.
     last_ack_ = std::max(last_ack_, request.last_received_sequence());
@@ -222,6 +263,8 @@ void StreamSession::handle_frame(const v1::FrameRequest& request) {
         status = {grpc::StatusCode::INVALID_ARGUMENT,
                   "frame.sequence: " + std::to_string(request.sequence()) + " is not greater than the previous " +
                       std::to_string(last_request_sequence_)};
+    else if (!enum_values.ok())
+        status = enum_values;
     else
         status = parse_frame_request(request, setup_.intrinsics, "frame", &frame);
     if (!status.ok()) {
@@ -371,6 +414,7 @@ void StreamSession::choose_write_locked(Actions& actions) {
     out->set_frames_sent(stats_.frames_sent);
     out->set_frame_errors(stats_.frame_errors);
     out->set_frames_reused(stats_.frames_reused);
+    out->set_frame_requests_delayed(stats_.frame_requests_delayed);
     under_way_.write = true;
     write_started_ = Clock::now();
     in_flight_bytes_ = static_cast<std::int64_t>(in_flight_.data().size());

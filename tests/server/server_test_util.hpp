@@ -33,6 +33,8 @@
 namespace catgs::test {
 
 inline constexpr const char* kTestScene = "builtin:city?gaussians=20000&seed=1";
+/// How much the timing bounds of the tests stretch: 1, or more under sanitizers.
+inline constexpr int kTimingSlack = CATGS_TIMING_SLACK;
 inline constexpr int kWidth = 160, kHeight = 90;
 
 inline server::ServerOptions test_options() {

@@ -1,6 +1,8 @@
 // Limits (docs/limits-and-errors.md, "Limits"): message sizes, the client name, the pose rate,
 // per-session renderer memory, the stall watchdog for clients that stop reading, and the
 // renderer pool of unary renders.
+#include <cstdio>
+
 #include "fake_device.hpp"
 #include "server_test_util.hpp"
 
@@ -56,7 +58,7 @@ TEST(ServerLimits, RequestsLargerThanTheReceiveLimitAreRefused) {
 }
 
 /// Frame requests beyond max_pose_rate are not refused and not lost: the server reads them
-/// later, so the client is slowed down by flow control.
+/// later, so the client is slowed down by flow control, and StreamStats tells it so.
 TEST(ServerLimits, PoseRateLimitSlowsAFastClientDown) {
     constexpr double kRate = 100;
     constexpr int kRequests = 250;  // 100 at once (the burst), the rest at 100/s: >= 1.5 s
@@ -91,6 +93,9 @@ TEST(ServerLimits, PoseRateLimitSlowsAFastClientDown) {
     EXPECT_EQ(last.sequence(), static_cast<std::uint64_t>(kRequests));
     EXPECT_EQ(last.stats().requests_received(), static_cast<std::uint64_t>(kRequests));
     EXPECT_EQ(last.stats().frame_errors(), 0u);
+    // The client sees that it was throttled: the stream's own count of delayed reads.
+    EXPECT_GT(last.stats().frame_requests_delayed(), 0u);
+    EXPECT_EQ(last.stats().frame_requests_delayed(), server->stats().reads_delayed);
 }
 
 /// Renderer memory per session (as the backend reports it; here a simulated device whose
@@ -134,10 +139,12 @@ TEST(ServerLimits, SessionMemoryLimit) {
 }
 
 /// A client that stops reading: its frame sits in flow control; after stall_timeout_ms the
-/// watchdog cancels the stream and frees the session. Other streams are not touched.
+/// watchdog cancels the stream, within 10% of the timeout, and frees the session. The client
+/// gets the reason although it reads nothing. Other streams are not touched.
 TEST(ServerLimits, StallWatchdogCancelsAStreamWhoseClientStoppedReading) {
+    constexpr int kTimeoutMs = 2000;
     server::ServerOptions o = test_options();
-    o.limits.stall_timeout_ms = 1000;
+    o.limits.stall_timeout_ms = kTimeoutMs;
     auto server = start_server(o);
     BackgroundStream healthy(server->port());
     ASSERT_TRUE(healthy.advances(2));
@@ -164,17 +171,60 @@ TEST(ServerLimits, StallWatchdogCancelsAStreamWhoseClientStoppedReading) {
     }
     const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - begin).count();
     EXPECT_EQ(server->stats().streams_stalled, 1u);
-    EXPECT_LT(seconds, 20.0);  // about 1-2 s: the windows fill within a few frames, then 1 s
-    // Cancelled: trailers cannot pass a stream that is not read, so the client sees CANCELLED.
+    EXPECT_LT(seconds, 20.0);  // about 2-3 s: the windows fill within a few frames, then 2 s
+    // The cancel carries the status past the unread frame, with how long that frame waited.
     const grpc::Status status = client.finish();
-    EXPECT_EQ(status.error_code(), grpc::StatusCode::CANCELLED) << status.error_message();
     std::printf("stall watchdog: cancelled after %.2f s (%llu poses sent); client status %d '%s'\n", seconds,
                 static_cast<unsigned long long>(seq), static_cast<int>(status.error_code()),
                 status.error_message().c_str());
+    EXPECT_EQ(status.error_code(), grpc::StatusCode::DEADLINE_EXCEEDED) << status.error_message();
+    long waited_ms = -1, limit_ms = -1;
+    ASSERT_EQ(std::sscanf(status.error_message().c_str(),
+                          "stall-timeout: the client took no frame off the wire for %ld ms (limit %ld ms)", &waited_ms,
+                          &limit_ms),
+              2)
+        << status.error_message();
+    EXPECT_EQ(limit_ms, kTimeoutMs);
+    EXPECT_GT(waited_ms, kTimeoutMs);
+    EXPECT_LE(waited_ms, kTimeoutMs + kTimeoutMs / 10 * kTimingSlack) << "the watchdog fired more than 10% late";
     EXPECT_TRUE(eventually([&] { return server->stats().streams_open == 1; })) << server->stats().streams_open;
     EXPECT_TRUE(eventually([&] { return server->stats().sessions_active == 1; }));
     healthy.expect_kept_going();
     EXPECT_EQ(server->stats().streams_stalled, 1u);  // the healthy stream never stalled
+}
+
+/// A call that never sends its opening message is finished after open_timeout_ms with
+/// DEADLINE_EXCEEDED naming the timeout, on time; one that opens in time is not touched.
+TEST(ServerLimits, AStreamWithoutItsOpeningMessageIsFinishedAfterTheOpenTimeout) {
+    constexpr int kTimeoutMs = 1000;
+    server::ServerOptions o = test_options();
+    o.limits.open_timeout_ms = kTimeoutMs;
+    auto server = start_server(o);
+    const auto begin = std::chrono::steady_clock::now();
+    StreamClient silent(channel_to(server->port()));
+    StreamClient late_but_in_time(channel_to(server->port()));
+    std::this_thread::sleep_for(std::chrono::milliseconds(kTimeoutMs / 2));
+    ASSERT_TRUE(late_but_in_time.open(session_config(v1::ENCODING_JPEG)));
+
+    const grpc::Status status = silent.finish();
+    const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - begin).count();
+    EXPECT_EQ(status.error_code(), grpc::StatusCode::DEADLINE_EXCEEDED) << status.error_message();
+    EXPECT_NE(status.error_message().find("open-timeout: no opening message (StreamRequest.open) within 1000 ms"),
+              std::string::npos)
+        << status.error_message();
+    EXPECT_GE(seconds, kTimeoutMs / 1000.0);
+    // The watchdog's lateness (at most 10%), plus the round trip.
+    EXPECT_LT(seconds, (kTimeoutMs + kTimeoutMs / 10 * kTimingSlack) / 1000.0 + 0.2 * kTimingSlack);
+    EXPECT_EQ(server->stats().open_timeouts, 1u);
+
+    // Long past the timeout, the opened stream still renders.
+    std::this_thread::sleep_for(std::chrono::milliseconds(kTimeoutMs));
+    ASSERT_TRUE(late_but_in_time.send(frame_request(1, uav_path(2)[0], 0)));
+    v1::Frame frame;
+    ASSERT_TRUE(late_but_in_time.stream->Read(&frame));
+    EXPECT_FALSE(frame.has_error()) << frame.error().message();
+    EXPECT_TRUE(late_but_in_time.close().ok());
+    EXPECT_EQ(server->stats().open_timeouts, 1u);
 }
 
 /// Unary renders reuse pooled renderers (at most render_workers of them) and stay exact.

@@ -33,8 +33,12 @@ struct Limits {
     /// later, so HTTP/2 flow control slows them down.
     double max_pose_rate = 240;
     /// A stream whose client has not taken a frame off the wire for this long (a write stuck
-    /// in flow control) is cancelled, freeing its session (0: never).
+    /// in flow control) is cancelled with DEADLINE_EXCEEDED, freeing its session (0: never).
     int stall_timeout_ms = 20000;
+    /// A stream that has not sent its opening message this long after it started is finished
+    /// with DEADLINE_EXCEEDED (0: never): an idle call would otherwise hold a stream slot, its
+    /// buffers and a place in the shutdown drain for as long as the client likes.
+    int open_timeout_ms = 10000;
 };
 
 /// The status of every call refused or ended because the server is draining (shutting down):

@@ -32,6 +32,13 @@ inline constexpr double kDefaultHorizontalFovDegrees = 70.0;
 inline constexpr int kDefaultMaxUnackedFrames = 2;
 inline constexpr int kMaxUnackedFramesLimit = 2;
 
+/// INVALID_ARGUMENT naming the first enum field of `message`, at any depth (e.g.
+/// "open.pipeline.cache"), whose value its enum does not define; OK otherwise. Proto3 enums
+/// are open: the parser keeps an unknown number in the field, and a switch over the known
+/// values would silently take its default. Walked through the descriptors, so fields added to
+/// the protocol later are checked without code here. `prefix` starts every path ("": none).
+grpc::Status check_enum_values(const google::protobuf::Message& message, const std::string& prefix);
+
 struct SessionSetup {
     std::string scene_id;
     Intrinsics intrinsics;

@@ -88,7 +88,7 @@ grpc::Status acquire_scene(SceneRegistry& registry, const std::string& id, const
 
 /// The id LoadScene uses when none is given: the file stem, or the generator's name.
 std::string default_scene_id(const std::string& source);
-/// Ids are 1..128 characters of [A-Za-z0-9._-].
+/// Ids are 1..128 characters of [A-Za-z0-9._-], other than "." and "..".
 bool valid_scene_id(const std::string& id);
 
 }  // namespace catgs::server

@@ -32,8 +32,15 @@ public:
     /// refused with UNAVAILABLE, open streams end with UNAVAILABLE asking clients to reconnect.
     void begin_shutdown();
     /// begin_shutdown(), then stops the gRPC server (calls still running at the deadline are
-    /// cancelled), the workers and the health listener. Returns within about `grace`.
+    /// cancelled), the workers and the health listener. Streams that did not end by
+    /// themselves within a second (a client that does not read) are cancelled with the
+    /// shutdown status first, so that they too get its message. Returns within about `grace`
+    /// plus that second.
     void shutdown(std::chrono::milliseconds grace);
+    /// What SIGTERM does, as Kubernetes expects: begin_shutdown(), then the listeners stay
+    /// open for ServerOptions::drain_ms (health answers NOT_SERVING, new sessions get
+    /// UNAVAILABLE), then shutdown(shutdown_grace_ms).
+    void drain_and_shutdown();
     /// Blocks until shutdown() has completed.
     void wait();
 
@@ -41,6 +48,10 @@ public:
     ServerCore& core() { return *core_; }
 
 private:
+    /// Waits up to `wait` for the drained streams to end, cancels those left with the
+    /// shutdown status, and waits (bounded) for the cancels to complete.
+    void end_streams(std::chrono::milliseconds wait);
+
     std::unique_ptr<ServerCore> core_;
     std::unique_ptr<RenderServiceImpl> render_service_;
     std::unique_ptr<SceneServiceImpl> scene_service_;

@@ -42,6 +42,11 @@ struct ServerOptions {
     /// Serve gRPC server reflection (never while a bearer token is required: reflection
     /// would answer without one).
     bool reflection = true;
+    /// On SIGTERM (Server::drain_and_shutdown): how long the listeners stay open after health
+    /// turns NOT_SERVING, refusing new sessions with UNAVAILABLE, while load balancers and
+    /// Kubernetes endpoints stop sending traffic here.
+    int drain_ms = 5000;
+    /// After the drain: time given to unary calls still running before they are cancelled.
     int shutdown_grace_ms = 5000;
     /// Tests only: makes the renderers instead of make_renderer(backend, ...), e.g. to
     /// simulate a device that runs out of memory.
@@ -61,6 +66,7 @@ struct ServerStats {
     std::int64_t bytes_buffered = 0;       ///< their bytes (gauge)
     std::int64_t peak_session_buffered = 0;  ///< most frames one session ever held at once
     std::uint64_t streams_stalled = 0;     ///< streams cancelled by the stall watchdog
+    std::uint64_t open_timeouts = 0;       ///< streams finished for sending no opening message in time
     std::uint64_t reads_delayed = 0;       ///< reads postponed by the pose-rate limit
     std::uint64_t out_of_memory = 0;       ///< sessions and loads refused for memory
     int pooled_renderers = 0;              ///< idle renderers kept for unary renders (gauge)
@@ -103,7 +109,7 @@ public:
             frame_errors{0};
         std::atomic<std::int64_t> frames_buffered{0}, bytes_buffered{0}, peak_session_buffered{0};
         std::atomic<std::uint64_t> next_session_id{1};
-        std::atomic<std::uint64_t> streams_stalled{0}, reads_delayed{0}, out_of_memory{0};
+        std::atomic<std::uint64_t> streams_stalled{0}, open_timeouts{0}, reads_delayed{0}, out_of_memory{0};
     };
     Counters& counters() { return counters_; }
     ServerStats stats() const;

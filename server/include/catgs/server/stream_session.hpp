@@ -13,17 +13,20 @@
 // Backpressure (latest wins, bounded memory):
 // - input: one pending pose; a newer request replaces it (poses_coalesced); frame requests
 //   beyond Limits::max_pose_rate are not refused but read later (TokenBucket; the next read
-//   waits on an alarm), so HTTP/2 flow control slows the client down;
+//   waits on an alarm), so HTTP/2 flow control slows the client down, and each frame's
+//   StreamStats.frame_requests_delayed tells it so;
 // - credits: at most max_unacked_frames frames rendered but not acknowledged by the client
 //   (FrameRequest.last_received_sequence); while over budget nothing is rendered;
 // - output: one frame in flight in gRPC plus one waiting; a newer encoded frame replaces the
 //   waiting one (frames_coalesced). Error frames queue separately, at most a few;
 // - stalls: a frame in flight longer than Limits::stall_timeout_ms (the client stopped
-//   reading) gets the call cancelled by the server's watchdog (cancel_if_stalled).
+//   reading) gets the call cancelled by the server's watchdog (cancel_if_stalled), and a call
+//   still without its opening message after Limits::open_timeout_ms is finished
+//   (finish_if_not_opened).
 //
-// Finish is never called while a write, a postponed read or a watchdog cancel is under way
-// (UnderWay): each of those calls into gRPC from outside a reaction, which is only safe before
-// Finish. The session waits in Phase::finishing until ready_to_finish_locked().
+// Finish is never called while a write, a postponed read or a cancel is under way (UnderWay):
+// each of those calls into gRPC from outside a reaction, which is only safe before Finish. The
+// session waits in Phase::finishing until ready_to_finish_locked().
 #pragma once
 
 #include <grpcpp/alarm.h>
@@ -58,9 +61,16 @@ public:
     /// Server shutdown: drop queued work and end the stream with `status` as soon as no write
     /// is in flight.
     void drain(const grpc::Status& status);
-    /// Watchdog: cancels the call when a frame has been in flight longer than `timeout`.
-    /// Returns true when it cancelled.
+    /// Ends the call now with `status` (or with the end already decided), even while a frame
+    /// sits in flow control because the client does not read: the client still gets the status
+    /// and its message (see cancel_call). For streams that drain() could not finish in time.
+    void cancel(const grpc::Status& status);
+    /// Watchdog: cancels the call, DEADLINE_EXCEEDED, when a frame has been in flight longer
+    /// than `timeout`. Returns true when it cancelled.
     bool cancel_if_stalled(Clock::time_point now, std::chrono::milliseconds timeout);
+    /// Watchdog: finishes the call, DEADLINE_EXCEEDED, when its opening message has not arrived
+    /// within `timeout` of its start. Returns true when it did.
+    bool finish_if_not_opened(Clock::time_point now, std::chrono::milliseconds timeout);
 
     void OnReadDone(bool ok) override;
     void OnWriteDone(bool ok) override;
@@ -91,10 +101,10 @@ private:
     /// Calls into gRPC made from outside a reaction. They are safe only before Finish (after
     /// it the call may end at any moment), so Finish waits until none is under way.
     struct UnderWay {
-        bool write = false;            ///< StartWrite of in_flight_buffer_; OnWriteDone has not run
-        bool postponed_read = false;   ///< the next read waits on read_alarm_, or its StartRead is being made
-        bool watchdog_cancel = false;  ///< cancel_if_stalled is calling TryCancel
-        bool any() const { return write || postponed_read || watchdog_cancel; }
+        bool write = false;           ///< StartWrite of in_flight_buffer_; OnWriteDone has not run
+        bool postponed_read = false;  ///< the next read waits on read_alarm_, or its StartRead is being made
+        bool cancel = false;          ///< cancel_call is cancelling the call
+        bool any() const { return write || postponed_read || cancel; }
     };
 
     struct PendingPose {
@@ -103,7 +113,8 @@ private:
     };
 
     void handle_open(const v1::SessionConfig& config);
-    void handle_frame(const v1::FrameRequest& request);
+    /// `enum_values`: check_enum_values of the whole StreamRequest.
+    void handle_frame(const v1::FrameRequest& request, const grpc::Status& enum_values);
     void initialise();   // render pool: make the renderer
     void render_next();  // render pool: render the newest pose
     void render(PendingPose pose);  // render pool: render_next's render and the encode it posts
@@ -136,6 +147,9 @@ private:
     void error_frame_locked(std::uint64_t sequence, const grpc::Status& status);
     void postpone_read(Clock::duration delay);
     void on_read_alarm();
+    /// With under_way_.cancel set by the caller: cancels the call with `status`, then lets the
+    /// finish proceed.
+    void cancel_call(const grpc::Status& status);
 
     ServerCore& core_;
     grpc::CallbackServerContext* context_;
@@ -188,7 +202,7 @@ private:
     // Session statistics (for Frame.stats and the close log line).
     struct Counters {
         std::uint64_t requests_received = 0, poses_coalesced = 0, frames_coalesced = 0, frames_sent = 0,
-                      frame_errors = 0, frames_reused = 0;
+                      frame_errors = 0, frames_reused = 0, frame_requests_delayed = 0;
     };
     Counters stats_;
     double render_ms_sum_ = 0, encode_ms_sum_ = 0;
