@@ -176,6 +176,44 @@ TEST(SceneIoBadPly, HugeCountsFailFastWithoutAllocating) {
     expect_ply_error(before.bytes(), {"negative list length -1", "record 0, property 'ids'"});
 }
 
+// A file that ends before the data of an element declared after the vertices was cut short:
+// refused naming that element, whether its records have a fixed size (checked by size), lists
+// (walked) or ASCII lines; complete or empty trailing elements still load.
+TEST(SceneIoBadPly, TruncatedElementAfterTheVertices) {
+    Ply fixed = graphdeco_ply(2, 0);
+    fixed.after_header = "element face 1\nproperty float quality\nproperty int id\n";
+    expect_ply_error(fixed.bytes(), {"element 'face' declares 1 records", "need 8 bytes", "only 0 bytes follow",
+                                     "byte offset " + std::to_string(fixed.bytes().size())});
+    fixed.after_data = std::string(3, '\0');
+    expect_ply_error(fixed.bytes(), {"element 'face' declares 1 records", "need 8 bytes", "only 3 bytes follow"});
+    fixed.after_data = std::string(8, '\0');
+    const std::string complete = tmp_path("trailing-fixed.ply");
+    write_file(complete, fixed.bytes());
+    EXPECT_EQ(catgs::read_ply(complete).count(), 2u);
+
+    for (const std::string format : {"binary_little_endian", "binary_big_endian"}) {
+        SCOPED_TRACE(format);
+        Ply list = graphdeco_ply(2, 0, format);
+        list.after_header = "element face 1\nproperty list uchar int vertex_indices\n";
+        expect_ply_error(list.bytes(), {"data ends inside element 'face'", "record 0, property 'vertex_indices'"});
+        list.after_data = std::string("\x03", 1) + std::string(8, '\0');  // 3 indices, 2 present
+        expect_ply_error(list.bytes(), {"data ends inside element 'face'", "record 0, property 'vertex_indices'"});
+    }
+
+    Ply ascii = graphdeco_ply(2, 0, "ascii");
+    ascii.after_header = "element face 2\nproperty list uchar int vertex_indices\n";
+    ascii.after_data = "3 0 1 0\n";
+    expect_ply_error(ascii.bytes(), {"data ends inside element 'face'", "record 1"});
+    ascii.after_data = "";
+    expect_ply_error(ascii.bytes(), {"data ends inside element 'face'", "record 0"});
+
+    Ply empty = graphdeco_ply(2, 0);
+    empty.after_header = "element face 0\nproperty list uchar int vertex_indices\n";
+    const std::string none = tmp_path("trailing-empty.ply");
+    write_file(none, empty.bytes());
+    EXPECT_EQ(catgs::read_ply(none).count(), 2u);
+}
+
 // LoadOptions::max_records (the fuzz targets' allocation cap): a file that declares more
 // records is refused before anything is allocated for it; the default changes nothing.
 TEST(SceneIoLimits, MaxRecordsRefusesLargerFiles) {

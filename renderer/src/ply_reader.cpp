@@ -396,6 +396,14 @@ void skip_ascii_element(io::FileReader& in, const PlyElement& element) {
     }
 }
 
+/// Walks over one element whose values are not used (before or after the vertices).
+void skip_element(io::FileReader& in, const PlyElement& element, bool ascii, bool big_endian) {
+    if (ascii)
+        skip_ascii_element(in, element);
+    else
+        skip_binary_element(in, element, big_endian);
+}
+
 struct BinarySlot {
     std::size_t offset;
     io::ScalarType type;
@@ -505,13 +513,7 @@ Scene read_ply(const std::string& path, const LoadOptions& options, LoadReport* 
     const bool ascii = header.format == PlyFormat::kAscii;
     const bool big_endian = header.format == PlyFormat::kBinaryBigEndian;
 
-    for (std::size_t e = 0; e < header.vertex; ++e) {
-        if (ascii) {
-            skip_ascii_element(in, header.elements[e]);
-        } else {
-            skip_binary_element(in, header.elements[e], big_endian);
-        }
-    }
+    for (std::size_t e = 0; e < header.vertex; ++e) skip_element(in, header.elements[e], ascii, big_endian);
 
     if (vertex.count == 0)
         fail(path, "no Gaussians: the vertex element has 0 records", io::at_header_line(vertex.line));
@@ -525,6 +527,11 @@ Scene read_ply(const std::string& path, const LoadOptions& options, LoadReport* 
     } else {
         read_binary_vertices(in, vertex, layout, big_endian, builder, ticker);
     }
+    // Elements after the vertices (faces, say) are not used, but a file that ends before their
+    // data was cut short, so its vertices cannot be trusted either: the records must be there,
+    // checked by size when binary records have a fixed size, else walked (lists, ASCII lines).
+    for (std::size_t e = header.vertex + 1; e < header.elements.size(); ++e)
+        skip_element(in, header.elements[e], ascii, big_endian);
     Scene scene = builder.finish(report);
     ticker.finish();
     return scene;
