@@ -5,10 +5,12 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <filesystem>
 #include <string>
 #include <vector>
 
 #include "catgs/error.hpp"
+#include "catgs/progress.hpp"
 #include "catgs/scene.hpp"
 #include "catgs/scene_io.hpp"
 #include "scene_io_fixtures.hpp"
@@ -171,7 +173,10 @@ TEST(SceneIoPly, ShuffledPropertiesExtraPropertiesAndElements) {
             put(after, std::uint8_t(3), big);
             for (std::int32_t i : {0, 1, 2}) put(after, i, big);
             put(after, 0.5f, big);
-            ply.after_data = after;  // truncated face data: ignored, it follows the vertices
+            put(after, std::uint8_t(3), big);
+            for (std::int32_t i : {1, 2, 3}) put(after, i, big);
+            put(after, 0.25f, big);
+            ply.after_data = after;  // read over, not used (a truncated one is refused: test_scene_io_bad_ply.cpp)
         }
         std::string path = tmp_path(format + ".ply");
         write_file(path, ply.bytes());
@@ -180,6 +185,29 @@ TEST(SceneIoPly, ShuffledPropertiesExtraPropertiesAndElements) {
         EXPECT_EQ(s.sh_degree, 1);
         for (std::size_t g = 0; g < 4; ++g) expect_gaussian(s, g, ply.rows[g]);
     }
+}
+
+/// The tools' progress on stderr: a load reports its last chunk and then its end, both at
+/// 100%; the line is printed once. A step run again under the same label (rate-limited in
+/// between) prints its own 100% line.
+TEST(SceneIoPly, StderrProgressPrintsTheFinalLineOnce) {
+    const std::string path = tmp_path("progress-once.ply");
+    write_file(path, graphdeco_ply(50, 0).bytes());
+    catgs::LoadOptions options;
+    options.progress = catgs::stderr_progress(true);
+    testing::internal::CaptureStderr();
+    catgs::read_ply(path, options);
+    options.progress(0.5, "another step");
+    options.progress(1.0, "another step");
+    options.progress(1.0, "another step");
+    options.progress(0.0, "another step");
+    options.progress(1.0, "another step");
+    const std::string out = testing::internal::GetCapturedStderr();
+    const std::string line = "loading " + std::filesystem::path(path).filename().string() + ": 100%\n";
+    ASSERT_NE(out.find(line), std::string::npos) << out;
+    EXPECT_EQ(out.find(line, out.find(line) + 1), std::string::npos) << out;
+    EXPECT_EQ(out.substr(out.find("another step")),
+              "another step:  50%\nanother step: 100%\nanother step: 100%\n");
 }
 
 TEST(SceneIoPly, ShDegreeOneChannelMajorByHand) {

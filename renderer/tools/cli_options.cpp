@@ -3,8 +3,10 @@
 #include <algorithm>
 #include <cctype>
 #include <cmath>
+#include <cstdio>
 #include <fstream>
 #include <limits>
+#include <optional>
 #include <sstream>
 #include <stdexcept>
 
@@ -33,6 +35,31 @@ std::string PipelineFlags::angle_name(double radians) {
     return out.str();
 }
 
+namespace {
+
+/// --help's default of --reuse-order-max-deg as a person reads it: "0.0000573 (1e-6 rad)"
+/// rather than the flag's value text, 5.72958e-05, which stays what is parsed.
+std::string readable_degrees(const std::string& flag_value) {
+    const std::optional<double> degrees = parse_degrees(flag_value);
+    if (!degrees || !(*degrees > 0)) return flag_value;
+    // Three significant digits in positional notation, trailing zeros dropped.
+    const int decimals = std::max(0, 2 - static_cast<int>(std::floor(std::log10(*degrees))));
+    char text[64];
+    std::snprintf(text, sizeof text, "%.*f", decimals, *degrees);
+    std::string shown = text;
+    if (shown.find('.') != std::string::npos) {
+        while (shown.back() == '0') shown.pop_back();
+        if (shown.back() == '.') shown.pop_back();
+    }
+    std::snprintf(text, sizeof text, "%.3g", *degrees * kPi / 180.0);
+    std::string radians = text;
+    for (const char* padded : {"e-0", "e+0"})
+        if (const auto at = radians.find(padded); at != std::string::npos) radians.erase(at + 2, 1);
+    return shown + " (" + radians + " rad)";
+}
+
+}  // namespace
+
 void add_pipeline_flags(CLI::App& app, PipelineFlags& f) {
     app.add_option("--culling", f.culling, "exact, bbox3sigma or opacity-aware")->capture_default_str();
     app.add_option("--split", f.split, "tile task splitting: off, auto, or k (lists longer than k are split)")
@@ -56,7 +83,7 @@ void add_pipeline_flags(CLI::App& app, PipelineFlags& f) {
                    "with --resort off: a cached frame reuses the key frame's depth order while it has turned at "
                    "most this many degrees from the key frame (translation keeps the order), else it re-sorts; "
                    "'any': always reuse (the paper's cache)")
-        ->capture_default_str();
+        ->default_str(readable_degrees(f.reuse_order_max_deg));
     app.add_option("--chunks", f.chunks,
                    "chunk-level culling: skip the scene's spatial chunks that no pose can see (on or off; exact "
                    "culling never skips)")

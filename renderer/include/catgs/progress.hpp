@@ -12,7 +12,7 @@ namespace catgs {
 using Progress = std::function<void(double fraction, const std::string& label)>;
 
 /// A Progress that prints "label: 42%" lines to stderr at most every `interval`, plus the
-/// final 100% line. Silent when `enabled` is false.
+/// final 100% line (once, however often the step reports it). Silent when `enabled` is false.
 Progress stderr_progress(bool enabled = true, std::chrono::milliseconds interval = std::chrono::milliseconds(500));
 
 }  // namespace catgs

@@ -1,0 +1,40 @@
+// The tools' shared pipeline flags (renderer/tools/cli_options.hpp) as --help shows them.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <string>
+
+#include "catgs/render_options.hpp"
+#include "cli_options.hpp"
+
+namespace {
+
+/// --help shows the order-reuse default as a person reads it, in degrees and radians, while
+/// the value parsed when the flag is not given stays the one it always was.
+TEST(CliOptions, ReuseOrderDefaultReadsAsAPersonWritesIt) {
+    CLI::App app{"test"};
+    catgs::cli::PipelineFlags flags;
+    catgs::cli::add_pipeline_flags(app, flags);
+    const std::string help = app.help();
+    EXPECT_NE(help.find("--reuse-order-max-deg TEXT=0.0000573 (1e-6 rad)"), std::string::npos) << help;
+    EXPECT_EQ(help.find("5.72958e-05"), std::string::npos) << help;
+
+    app.parse(std::vector<std::string>{});
+    EXPECT_EQ(flags.reuse_order_max_deg, catgs::cli::PipelineFlags::angle_name(catgs::kDefaultReuseOrderMaxAngle));
+    catgs::RenderOptions options;
+    catgs::cli::apply_pipeline_flags(flags, options);
+    EXPECT_DOUBLE_EQ(options.catgs.reuse_order_max_angle, *catgs::parse_degrees(flags.reuse_order_max_deg) * catgs::kPi / 180.0);
+    EXPECT_NEAR(options.catgs.reuse_order_max_angle, catgs::kDefaultReuseOrderMaxAngle, 1e-12);
+
+    // Other values show the same way; "any" as itself.
+    for (const auto& [value, shown] : {std::pair{"180", "TEXT=180 (3.14 rad)"}, std::pair{"0.05", "TEXT=0.05 (0.000873 rad)"},
+                                       std::pair{"any", "TEXT=any"}}) {
+        CLI::App other{"test"};
+        catgs::cli::PipelineFlags f;
+        f.reuse_order_max_deg = value;
+        catgs::cli::add_pipeline_flags(other, f);
+        EXPECT_NE(other.help().find(std::string("--reuse-order-max-deg ") + shown), std::string::npos) << other.help();
+    }
+}
+
+}  // namespace
