@@ -6,7 +6,7 @@
 
 #include "catgs/common/files.hpp"
 #include "catgs/error.hpp"
-#include "catgs/server/net_config.hpp"
+#include "catgs/common/net_config.hpp"
 
 namespace catgs::client {
 

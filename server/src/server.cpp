@@ -13,7 +13,7 @@
 
 #include "catgs/common/files.hpp"
 #include "catgs/error.hpp"
-#include "catgs/server/net_config.hpp"
+#include "catgs/common/net_config.hpp"
 #include "catgs/server/services.hpp"
 #include "catgs/server/stream_session.hpp"
 

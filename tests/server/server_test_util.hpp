@@ -23,7 +23,7 @@
 #include "catgs/image.hpp"
 #include "catgs/renderer.hpp"
 #include "catgs/scene_io.hpp"
-#include "catgs/server/net_config.hpp"
+#include "catgs/common/net_config.hpp"
 #include "catgs/server/request_validation.hpp"
 #include "catgs/server/server.hpp"
 #include "catgs/trajectory.hpp"
