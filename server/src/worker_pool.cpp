@@ -33,11 +33,6 @@ void WorkerPool::stop() {
     threads_.clear();
 }
 
-std::size_t WorkerPool::queued() const {
-    std::lock_guard lock(mutex_);
-    return tasks_.size();
-}
-
 void WorkerPool::run() {
     for (;;) {
         std::function<void()> task;

@@ -45,7 +45,6 @@ public:
         Lease(const Lease&) = delete;
         Lease& operator=(const Lease&) = delete;
         const std::shared_ptr<const Scene>& scene() const { return scene_; }
-        const std::string& id() const { return id_; }
 
     private:
         friend class SceneRegistry;

@@ -23,8 +23,6 @@ public:
     bool post(std::function<void()> task);
     /// Runs the tasks already queued, then joins the threads. Idempotent.
     void stop();
-    /// Tasks queued and not yet started.
-    std::size_t queued() const;
 
 private:
     void run();
