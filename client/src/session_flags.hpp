@@ -20,7 +20,7 @@ struct SessionFlags {
     double fov = 70;
     std::string encoding = "jpeg";
     int quality = 85;
-    // "server": leave the field unset, so the server's default applies (README, defaults).
+    // "server": leave the field unset, so the server's default applies (docs/pipeline.md, "Defaults, and why").
     std::string cache = "server";
     std::string window = "adaptive";
     std::string split = "server";

@@ -72,7 +72,7 @@ private:
 };
 
 /// A catgs::Error message for a file is one line that starts with the path: "<path>: ..."
-/// (scene_io.hpp, README "Bad input gets one error line naming the file"), or
+/// (scene_io.hpp, docs/formats.md, "Validation": one error line naming the file), or
 /// "<path>:<line>: ..." for the line-oriented trajectory format.
 inline void check_file_message(std::string_view message, const std::string& path) {
     require(message.substr(0, path.size() + 1) == path + ":", "error message does not start with the path: " +

@@ -2,7 +2,7 @@
 // key frame speculates on, the envelope of poses its cache covers, and the motion-adaptive
 // window W.
 //
-// Guarantee (README states it too): a frame is drawn from the cache only when it has the key
+// Guarantee (docs/pipeline.md, "Guarantee", states it too): a frame is drawn from the cache only when it has the key
 // frame's intrinsics and resolution and its pose lies within the envelope: within `guard_px`
 // of screen motion of one of the speculated poses, by a first-order bound over every cached
 // Gaussian (translation over the nearest cached depth, rotation, and the growth of the
