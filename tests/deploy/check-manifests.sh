@@ -185,7 +185,7 @@ if [ $mutations = 1 ]; then
     "deploy/k8s/envoy.yaml|lb_policy: MAGLEV|lb_policy: RANDOM|needs a MAGLEV or RING_HASH cluster"
     "deploy/envoy-host.yaml|http_connection_manager.v3.HttpConnectionManager\n|http_connection_manager.v3.HttpConnectionManagr\n|unknown type URL"
     "deploy/envoy-host.yaml|port_value: 50062|port_value: 50063|deploy/envoy-host.yaml expects"
-    "deploy/docker/compose.yaml|stop_grace_period: 10s|stop_grace_periods: 10s|schema"
+    "deploy/docker/compose.yaml|stop_grace_period: 15s|stop_grace_periods: 15s|schema"
     "deploy/Dockerfile|RUN bash deploy/install-deps.sh|RUN apt-get update|bash deploy/install-deps.sh"
     "deploy/Dockerfile|RUN cmake -S . -B build |RUN cmake -S . -B out |cmake -S . -B build"
     "deploy/Dockerfile|HEALTHCHECK --interval=15s|HEALTHCHECK --interval=15q|deploy/Dockerfile:"

@@ -555,7 +555,8 @@ function checkBase(objs) {
   const sleep = preStop[0] === "/bin/sleep" ? Number(preStop[1]) : 0;
   check(sleep > 0, sid, "needs a preStop sleep so that Envoy drops the pod before it drains");
   const grace = Number(flagValue(argv, "--shutdown-grace-ms") ?? 5000) / 1000;
-  check(podSpec.terminationGracePeriodSeconds > sleep + grace, sid, `terminationGracePeriodSeconds (${podSpec.terminationGracePeriodSeconds}) must exceed preStop ${sleep}s + --shutdown-grace-ms ${grace}s`);
+  const drain = Number(flagValue(argv, "--drain-ms") ?? 5000) / 1000;
+  check(podSpec.terminationGracePeriodSeconds > sleep + drain + grace, sid, `terminationGracePeriodSeconds (${podSpec.terminationGracePeriodSeconds}) must exceed preStop ${sleep}s + --drain-ms ${drain}s + --shutdown-grace-ms ${grace}s`);
   const maxSceneMb = Number(flagValue(argv, "--max-scene-mb") ?? 0);
   const memLimit = String(c.resources?.limits?.memory || "");
   const memMiB = /^(\d+)Gi$/.test(memLimit) ? Number(memLimit.slice(0, -2)) * 1024 : /^(\d+)Mi$/.test(memLimit) ? Number(memLimit.slice(0, -2)) : NaN;
