@@ -10,11 +10,7 @@
 // ALREADY_EXISTS). The numbers are catgs/common/exit_codes.hpp.
 #include <CLI/CLI.hpp>
 
-#include <exception>
-#include <iostream>
-
-#include "catgs/common/exit_codes.hpp"
-#include "catgs/error.hpp"
+#include "catgs/common/command_line.hpp"
 #include "commands.hpp"
 #include "connection.hpp"
 #include "stop.hpp"
@@ -34,27 +30,11 @@ int main(int argc, char** argv) {
     CLI::App* load = add_load_command(app, load_args);
     add_scenes_command(app, scenes_args);
 
-    try {
-        app.parse(argc, argv);
-    } catch (const CLI::CallForHelp& e) {
-        return app.exit(e);
-    } catch (const CLI::CallForAllHelp& e) {
-        return app.exit(e);
-    } catch (const CLI::ParseError& e) {
-        std::cerr << "catgs-client: " << e.what() << "\n";
-        return kExitBadInput;
-    }
-    try {
+    return catgs::run_command_line(app, argc, argv, "catgs-client", [&] {
         const Connection conn = make_connection(connection);
         stop_on_signals();
         if (stream->parsed()) return run_stream_command(conn, stream_args);
         if (load->parsed()) return run_load_command(conn, load_args);
         return run_scenes_command(conn, scenes_args);
-    } catch (const Error& e) {
-        std::cerr << "catgs-client: " << e.what() << "\n";
-        return kExitBadInput;
-    } catch (const std::exception& e) {
-        std::cerr << "catgs-client: failed: " << e.what() << "\n";
-        return kExitFailure;
-    }
+    });
 }

@@ -17,7 +17,7 @@
 #include <nlohmann/json.hpp>
 #include <sstream>
 
-#include "catgs/common/exit_codes.hpp"
+#include "catgs/common/command_line.hpp"
 #include "catgs/error.hpp"
 #include "catgs/renderer.hpp"
 #include "catgs/scene_io.hpp"
@@ -27,8 +27,6 @@
 
 namespace {
 
-using catgs::kExitBadInput;
-using catgs::kExitFailure;
 /// PSNR of identical images is infinite; tables and plots cap it here.
 constexpr double kPsnrCap = 100.0;
 
@@ -351,21 +349,5 @@ int main(int argc, char** argv) {
     app.add_flag("--image-digests", o.image_digests,
                  "add each frame's image digest (FNV-1a of the 8-bit RGB) to --json-out, to check that a change "
                  "leaves every image bit-identical");
-    try {
-        app.parse(argc, argv);
-    } catch (const CLI::CallForHelp& e) {
-        return app.exit(e);
-    } catch (const CLI::ParseError& e) {
-        std::cerr << "catgs-bench: " << e.what() << "\n";
-        return kExitBadInput;
-    }
-    try {
-        return run(o);
-    } catch (const catgs::Error& e) {
-        std::cerr << "catgs-bench: " << e.what() << "\n";
-        return kExitBadInput;
-    } catch (const std::exception& e) {
-        std::cerr << "catgs-bench: failed: " << e.what() << "\n";
-        return kExitFailure;
-    }
+    return catgs::run_command_line(app, argc, argv, "catgs-bench", [&] { return run(o); });
 }

@@ -10,7 +10,7 @@
 #include <nlohmann/json.hpp>
 #include <sstream>
 
-#include "catgs/common/exit_codes.hpp"
+#include "catgs/common/command_line.hpp"
 #include "catgs/error.hpp"
 #include "catgs/renderer.hpp"
 #include "catgs/scene_io.hpp"
@@ -21,8 +21,6 @@
 
 namespace {
 
-using catgs::kExitBadInput;
-using catgs::kExitFailure;
 
 struct Options {
     std::string scene = "builtin:city?gaussians=200000&seed=1";
@@ -213,23 +211,5 @@ int main(int argc, char** argv) {
     app.add_flag("--info", o.info, "print the scene's count, SH degree, bounds and memory, then exit");
     app.add_flag("--json", o.json, "machine-readable output (--info, or the render summary with per-frame stats)");
     app.add_flag("--quiet", o.quiet, "no progress output on stderr");
-    try {
-        app.parse(argc, argv);
-    } catch (const CLI::CallForHelp& e) {
-        return app.exit(e);
-    } catch (const CLI::CallForAllHelp& e) {
-        return app.exit(e);
-    } catch (const CLI::ParseError& e) {
-        std::cerr << "catgs-render: " << e.what() << "\n";
-        return kExitBadInput;
-    }
-    try {
-        return run(o);
-    } catch (const catgs::Error& e) {
-        std::cerr << "catgs-render: " << e.what() << "\n";
-        return kExitBadInput;
-    } catch (const std::exception& e) {
-        std::cerr << "catgs-render: failed: " << e.what() << "\n";
-        return kExitFailure;
-    }
+    return catgs::run_command_line(app, argc, argv, "catgs-render", [&] { return run(o); });
 }

@@ -10,6 +10,7 @@
 #include <iostream>
 #include <thread>
 
+#include "catgs/common/command_line.hpp"
 #include "catgs/common/exit_codes.hpp"
 #include "catgs/common/files.hpp"
 #include "catgs/error.hpp"
@@ -18,8 +19,6 @@
 
 namespace {
 
-using catgs::kExitBadInput;
-using catgs::kExitFailure;
 constexpr std::uint64_t kMiB = 1024 * 1024;
 
 std::string default_backend() {
@@ -95,16 +94,7 @@ int main(int argc, char** argv) {
                    "after the drain, time given to unary calls still running before they are cancelled")
         ->capture_default_str();
     app.add_option("--log-level", log_level, "trace, debug, info, warn, error")->capture_default_str();
-    try {
-        app.parse(argc, argv);
-    } catch (const CLI::CallForHelp& e) {
-        return app.exit(e);
-    } catch (const CLI::CallForAllHelp& e) {
-        return app.exit(e);
-    } catch (const CLI::ParseError& e) {
-        std::cerr << "catgs-server: " << e.what() << "\n";
-        return kExitBadInput;
-    }
+    if (const std::optional<int> status = catgs::parse_command_line(app, argc, argv, "catgs-server")) return *status;
 
     // SIGINT/SIGTERM are handled by one thread with sigwait; blocking them here, before any
     // thread starts, makes every other thread inherit the mask.
@@ -115,7 +105,7 @@ int main(int argc, char** argv) {
     pthread_sigmask(SIG_BLOCK, &signals, nullptr);
 
     std::unique_ptr<catgs::server::Server> server;
-    try {
+    const int started = catgs::run_reporting_errors("catgs-server", [&] {
         // Logs go to stderr: stdout carries only the "listening on port" line for scripts.
         spdlog::set_default_logger(spdlog::stderr_color_mt("catgs-server"));
         spdlog::set_level(spdlog::level::from_str(log_level));
@@ -138,13 +128,9 @@ int main(int argc, char** argv) {
             spdlog::warn("bearer token over plaintext: anyone on the path can read it; use --tls-cert/--tls-key");
         server = std::make_unique<catgs::server::Server>(o);
         server->start();
-    } catch (const catgs::Error& e) {
-        std::cerr << "catgs-server: " << e.what() << "\n";
-        return kExitBadInput;
-    } catch (const std::exception& e) {
-        std::cerr << "catgs-server: failed: " << e.what() << "\n";
-        return kExitFailure;
-    }
+        return catgs::kExitOk;
+    });
+    if (started != catgs::kExitOk) return started;
     // For scripts and tests that start the server on port 0.
     std::printf("catgs-server: listening on port %d\n", server->port());
     std::fflush(stdout);

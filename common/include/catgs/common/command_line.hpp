@@ -1,0 +1,24 @@
+// The command-line protocol every catgs executable follows, written once: --help prints and
+// exits 0; a bad flag, or input that throws catgs::Error, prints one line "<tool>: <why>" and
+// exits kExitBadInput; any other exception prints "<tool>: failed: <why>" and exits
+// kExitFailure (exit_codes.hpp).
+#pragma once
+
+#include <CLI/CLI.hpp>
+
+#include <functional>
+#include <optional>
+
+namespace catgs {
+
+/// Parses argv into `app`. nullopt: parsed, go on; otherwise the exit status (help was
+/// printed, or the one-line error).
+std::optional<int> parse_command_line(CLI::App& app, int argc, char** argv, const char* tool);
+
+/// Runs `body` and turns what it throws into the one-line error and the exit status above.
+int run_reporting_errors(const char* tool, const std::function<int()>& body);
+
+/// parse_command_line, then run_reporting_errors: the whole of most tools' main().
+int run_command_line(CLI::App& app, int argc, char** argv, const char* tool, const std::function<int()>& body);
+
+}  // namespace catgs
