@@ -70,7 +70,8 @@ inline std::string error_of(const std::function<void()>& f) {
 }
 
 /// The message names the file, is one line, and contains every part.
-inline void expect_error(const std::function<void()>& f, const std::string& path, const std::vector<std::string>& parts) {
+inline void expect_error(const std::function<void()>& f, const std::string& path,
+                         const std::vector<std::string>& parts) {
     std::string message = error_of(f);
     EXPECT_THAT(message, ::testing::StartsWith(path + ": "));
     EXPECT_EQ(message.find('\n'), std::string::npos) << message;
@@ -199,7 +200,7 @@ inline Row gaussian(int i, int degree) {
 }
 
 inline Ply graphdeco_ply(int records, int degree, const std::string& format = "binary_little_endian",
-                  const std::string& type = "float") {
+                         const std::string& type = "float") {
     Ply ply;
     ply.format = format;
     ply.props = graphdeco_props(degree, type);
@@ -267,7 +268,6 @@ inline std::string splat_bytes(const std::vector<SplatRecord>& records) {
     }
     return out;
 }
-
 
 /// A fresh seed per run (CATGS_TEST_SEED replays one), also recorded in the XML report.
 inline std::uint64_t fresh_seed() {

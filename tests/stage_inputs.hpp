@@ -142,7 +142,8 @@ inline std::vector<float> random_depths(std::mt19937_64& rng, std::size_t count)
 /// blend (power 0, so alpha is the opacity), without the early stop: the partial (R, A) a
 /// sub-task of a split tile writes. `colours` holds one RGB triple per entry.
 template <typename T>
-Partial<T> blend_slice(const std::vector<T>& alphas, const std::vector<T>& colours, std::size_t begin, std::size_t end) {
+Partial<T> blend_slice(const std::vector<T>& alphas, const std::vector<T>& colours, std::size_t begin,
+                       std::size_t end) {
     PixelAccumulator<T> acc;
     for (std::size_t i = begin; i < end; ++i)
         blend_power(acc, T(0), alphas[i], Vec3<T>{colours[3 * i], colours[3 * i + 1], colours[3 * i + 2]}, T(0));

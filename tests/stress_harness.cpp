@@ -80,9 +80,12 @@ void report(const std::string& suite, const std::string& what, const Classes& cl
 
 const char* bound_class_name(BoundClass k) {
     switch (k) {
-        case BoundClass::lossless: return "lossless";
-        case BoundClass::split: return "split";
-        case BoundClass::bbox3sigma: return "bbox3sigma";
+        case BoundClass::lossless:
+            return "lossless";
+        case BoundClass::split:
+            return "split";
+        case BoundClass::bbox3sigma:
+            return "bbox3sigma";
     }
     return "?";
 }
@@ -156,7 +159,8 @@ Classes check_case(const Backend& backend, const StressCase& c, const std::strin
         }
         for (const Frame& f : frames) {
             EXPECT_EQ(f.image.width, width) << what;
-            EXPECT_EQ(f.image.rgb.size(), 3u * static_cast<std::size_t>(width) * static_cast<std::size_t>(height)) << what;
+            EXPECT_EQ(f.image.rgb.size(), 3u * static_cast<std::size_t>(width) * static_cast<std::size_t>(height))
+                << what;
         }
     }
     return classes;
@@ -183,15 +187,16 @@ std::vector<LabelledCase> mixture_cases(std::uint64_t seed) {
 std::vector<LabelledCase> field_of_view_cases(std::uint64_t seed) {
     std::vector<LabelledCase> out;
     for (double fov : {5.0, 10.0, 30.0, 60.0, 90.0, 120.0, 150.0})
-        out.push_back({field_of_view(seed + static_cast<std::uint64_t>(fov), fov), seed_note(seed) + " fov " + std::to_string(fov),
-                       "fov 5..150"});
+        out.push_back({field_of_view(seed + static_cast<std::uint64_t>(fov), fov),
+                       seed_note(seed) + " fov " + std::to_string(fov), "fov 5..150"});
     return out;
 }
 
 std::vector<LabelledCase> resolution_cases(std::uint64_t seed) {
     std::vector<LabelledCase> out;
-    for (auto [w, h] : {std::pair{1, 1}, std::pair{1, 2}, std::pair{2, 1}, std::pair{1, 37}, std::pair{45, 1},
-                        std::pair{15, 17}, std::pair{16, 16}, std::pair{17, 17}, std::pair{255, 3}, std::pair{3, 129}}) {
+    for (auto [w, h] :
+         {std::pair{1, 1}, std::pair{1, 2}, std::pair{2, 1}, std::pair{1, 37}, std::pair{45, 1}, std::pair{15, 17},
+          std::pair{16, 16}, std::pair{17, 17}, std::pair{255, 3}, std::pair{3, 129}}) {
         StressCase c = mixture(seed + static_cast<std::uint64_t>(w * 1000 + h), 120);
         c.path = sideways_path(test::forward_camera(w, h, 60));  // see mixture()
         // Square pixels and a 60 degree horizontal field: 3 x 129 sees 175 degrees vertically,
@@ -222,7 +227,8 @@ void measure_bounds(const Backend& backend) {
     for (int s = 0; s < seeds; ++s) {
         const std::uint64_t seed = base + static_cast<std::uint64_t>(s) * 7919;
         std::vector<StressCase> cases = all_families(seed);
-        for (double fov : {5.0, 20.0, 90.0, 150.0}) cases.push_back(field_of_view(seed + static_cast<std::uint64_t>(fov), fov));
+        for (double fov : {5.0, 20.0, 90.0, 150.0})
+            cases.push_back(field_of_view(seed + static_cast<std::uint64_t>(fov), fov));
         for (const StressCase& c : cases) {
             const std::vector<Frame> reference = reference_frames(c);
             const std::string family = family_name(c.family);

@@ -86,7 +86,9 @@ using Classes = std::map<std::string, Measured>;
 
 std::string describe(const Measured& m);
 
-inline std::string seed_note(std::uint64_t seed) { return "(CATGS_TEST_SEED=" + std::to_string(seed) + ")"; }
+inline std::string seed_note(std::uint64_t seed) {
+    return "(CATGS_TEST_SEED=" + std::to_string(seed) + ")";
+}
 
 void report(const std::string& suite, const std::string& what, const Classes& classes);
 
@@ -118,7 +120,9 @@ const char* bound_class_name(BoundClass k);
 /// bbox3sigma lists are grown by the guard band on key frames, so a cached bbox3sigma frame
 /// draws more of the cut 3-sigma tails than the full one (measured up to 7 levels). A missing
 /// Gaussian is ~200.
-inline int cache_vs_full_levels(Culling culling) { return culling == Culling::bbox3sigma ? 10 : 1; }
+inline int cache_vs_full_levels(Culling culling) {
+    return culling == Culling::bbox3sigma ? 10 : 1;
+}
 
 /// The checks every backend makes of a configuration's measurement against its bound.
 /// `small_image`: a handful of pixels, where one value one level off already means a PSNR of
@@ -132,7 +136,8 @@ void expect_within(const Measured& m, const Bound& b, bool small_image, const st
 /// Marks those pixels in `covered` (size x size), so that the rest can be checked against the
 /// background.
 template <typename Level>
-int worst_in_crop(int size, Level level, const std::array<int, 4>& box, const ImageRGB8& crop, std::vector<bool>& covered) {
+int worst_in_crop(int size, Level level, const std::array<int, 4>& box, const ImageRGB8& crop,
+                  std::vector<bool>& covered) {
     const auto [x0, y0, x1, y1] = box;
     int worst = 0;
     for (int y = y0; y < y1; ++y)

@@ -15,28 +15,47 @@ namespace catgs::test::stress {
 
 const char* family_name(Family f) {
     switch (f) {
-        case Family::tiny_scales: return "tiny_scales";
-        case Family::huge_scales: return "huge_scales";
-        case Family::quaternions: return "quaternions";
-        case Family::opacities: return "opacities";
-        case Family::huge_sh: return "huge_sh";
-        case Family::extreme_sh: return "extreme_sh";
-        case Family::near_plane: return "near_plane";
-        case Family::image_border: return "image_border";
-        case Family::far_away: return "far_away";
-        case Family::utm: return "utm";
-        case Family::camera_inside: return "camera_inside";
-        case Family::degenerate: return "degenerate";
-        case Family::invalid: return "invalid";
-        case Family::ties: return "ties";
-        case Family::field_of_view: return "field_of_view";
-        case Family::mixture: return "mixture";
-        case Family::hdr_mixture: return "hdr_mixture";
+        case Family::tiny_scales:
+            return "tiny_scales";
+        case Family::huge_scales:
+            return "huge_scales";
+        case Family::quaternions:
+            return "quaternions";
+        case Family::opacities:
+            return "opacities";
+        case Family::huge_sh:
+            return "huge_sh";
+        case Family::extreme_sh:
+            return "extreme_sh";
+        case Family::near_plane:
+            return "near_plane";
+        case Family::image_border:
+            return "image_border";
+        case Family::far_away:
+            return "far_away";
+        case Family::utm:
+            return "utm";
+        case Family::camera_inside:
+            return "camera_inside";
+        case Family::degenerate:
+            return "degenerate";
+        case Family::invalid:
+            return "invalid";
+        case Family::ties:
+            return "ties";
+        case Family::field_of_view:
+            return "field_of_view";
+        case Family::mixture:
+            return "mixture";
+        case Family::hdr_mixture:
+            return "hdr_mixture";
     }
     return "?";
 }
 
-float activated_opacity(double logit) { return static_cast<float>(1.0 / (1.0 + std::exp(-logit))); }
+float activated_opacity(double logit) {
+    return static_cast<float>(1.0 / (1.0 + std::exp(-logit)));
+}
 
 void add(Scene& s, const Gaussian& g) {
     s.positions.insert(s.positions.end(), g.position.begin(), g.position.end());
@@ -47,12 +66,13 @@ void add(Scene& s, const Gaussian& g) {
     if (!g.sh.empty()) {
         for (std::size_t k = 0; k < stride; ++k) s.sh.push_back(k < g.sh.size() ? g.sh[k] : 0.0f);
     } else {
-        for (std::size_t k = 0; k < stride; ++k)
-            s.sh.push_back(k < 3 ? g.dc[k] : ((k / 3) % 2 ? g.rest : -g.rest));
+        for (std::size_t k = 0; k < stride; ++k) s.sh.push_back(k < 3 ? g.dc[k] : ((k / 3) % 2 ? g.rest : -g.rest));
     }
 }
 
-double Draw::log_uniform(double lo, double hi) { return std::exp(uniform(std::log(lo), std::log(hi))); }
+double Draw::log_uniform(double lo, double hi) {
+    return std::exp(uniform(std::log(lo), std::log(hi)));
+}
 
 std::array<float, 4> Draw::unit_quaternion() {
     std::normal_distribution<double> n(0, 1);
@@ -122,9 +142,13 @@ std::vector<Camera> short_path(const Camera& start, double step, double turn, in
     return path;
 }
 
-Camera case_camera(double fov) { return forward_camera(kCaseWidth, kCaseHeight, fov); }
+Camera case_camera(double fov) {
+    return forward_camera(kCaseWidth, kCaseHeight, fov);
+}
 
-std::vector<Camera> sideways_path(const Camera& start) { return short_path(start, 0.002, 0.0); }
+std::vector<Camera> sideways_path(const Camera& start) {
+    return short_path(start, 0.002, 0.0);
+}
 
 namespace {
 
@@ -198,10 +222,18 @@ StressCase quaternions(std::uint64_t seed) {
                    static_cast<float>(d.log_uniform(0.02, 0.3))};
         const auto q = d.unit_quaternion();
         switch (d.integer(0, 6)) {
-            case 0: g.rotation = {0, 0, 0, 0}; break;
-            case 1: g.rotation = {kNaN, q[1], q[2], q[3]}; break;
-            case 2: g.rotation = {q[0], kInf, q[2], q[3]}; break;
-            case 3: g.rotation = {1e-40f, 0, 0, 0}; break;  // denormal, near zero
+            case 0:
+                g.rotation = {0, 0, 0, 0};
+                break;
+            case 1:
+                g.rotation = {kNaN, q[1], q[2], q[3]};
+                break;
+            case 2:
+                g.rotation = {q[0], kInf, q[2], q[3]};
+                break;
+            case 3:
+                g.rotation = {1e-40f, 0, 0, 0};
+                break;  // denormal, near zero
             default: {
                 const float k = static_cast<float>(d.pick(std::vector<double>{1e-3, 0.5, 0.9, 1.1, 2.0, 30.0}));
                 g.rotation = {k * q[0], k * q[1], k * q[2], k * q[3]};
@@ -213,11 +245,16 @@ StressCase quaternions(std::uint64_t seed) {
 
 StressCase opacities(std::uint64_t seed) {
     const float a255 = static_cast<float>(1.0 / 255.0);
-    const std::vector<float> values{activated_opacity(100),        activated_opacity(-100),
-                                    1.0f,                          std::nextafter(1.0f, 0.0f),
-                                    a255,                          std::nextafter(a255, 0.0f),
-                                    std::nextafter(a255, 1.0f),    0.0f,
-                                    0.99f,                         activated_opacity(30)};
+    const std::vector<float> values{activated_opacity(100),
+                                    activated_opacity(-100),
+                                    1.0f,
+                                    std::nextafter(1.0f, 0.0f),
+                                    a255,
+                                    std::nextafter(a255, 0.0f),
+                                    std::nextafter(a255, 1.0f),
+                                    0.0f,
+                                    0.99f,
+                                    activated_opacity(30)};
     const FamilyShape shape{.sh_degree = 0, .background = 30, .adversarial = 90};
     return family_case(seed, "opacities", Family::opacities, shape, [&](Draw& d, const Scene&, int) {
         Gaussian g = d.ordinary(1.0, 10.0);
@@ -234,7 +271,8 @@ StressCase huge_sh(std::uint64_t seed) {
         for (int j = 0; j < 3; ++j) g.sh[static_cast<std::size_t>(j)] = g.dc[static_cast<std::size_t>(j)];
         const int hits = d.integer(1, 4);
         for (int h = 0; h < hits; ++h)
-            g.sh[static_cast<std::size_t>(d.integer(0, static_cast<int>(g.sh.size()) - 1))] = d.chance(0.5) ? 1e30f : -1e30f;
+            g.sh[static_cast<std::size_t>(d.integer(0, static_cast<int>(g.sh.size()) - 1))] =
+                d.chance(0.5) ? 1e30f : -1e30f;
         return g;
     });
 }
@@ -258,13 +296,18 @@ StressCase near_plane(std::uint64_t seed) {
         Gaussian g;
         double z = 0.2;
         switch (d.integer(0, 3)) {
-            case 0: z = 0.0; break;                                           // camera centre
-            case 1: z = -d.log_uniform(1e-3, 10); break;                      // behind
-            default: z = 0.2 * (1 + (d.chance(0.5) ? 1 : -1) * d.log_uniform(1e-5, 1e-2));
+            case 0:
+                z = 0.0;
+                break;  // camera centre
+            case 1:
+                z = -d.log_uniform(1e-3, 10);
+                break;  // behind
+            default:
+                z = 0.2 * (1 + (d.chance(0.5) ? 1 : -1) * d.log_uniform(1e-5, 1e-2));
         }
         const double lateral = z > 0 ? z : 0.2;
-        g.position = {static_cast<float>(d.uniform(-0.6, 0.6) * lateral), static_cast<float>(d.uniform(-0.4, 0.4) * lateral),
-                      static_cast<float>(z)};
+        g.position = {static_cast<float>(d.uniform(-0.6, 0.6) * lateral),
+                      static_cast<float>(d.uniform(-0.4, 0.4) * lateral), static_cast<float>(z)};
         if (i % 10 == 0) g.position[0] = g.position[1] = 0;  // on the optical axis
         for (float& sc : g.scale) sc = static_cast<float>(d.log_uniform(1e-4, 0.05));
         g.rotation = d.unit_quaternion();
@@ -284,10 +327,18 @@ StressCase image_border(std::uint64_t seed) {
         const double z = g.position[2];
         double u = d.uniform(0, k.width), v = d.uniform(0, k.height);
         switch (d.integer(0, 4)) {
-            case 0: u = d.chance(0.5) ? 0.0 : k.width; break;
-            case 1: v = d.chance(0.5) ? 0.0 : k.height; break;
-            case 2: u = 16.0 * d.integer(0, k.width / 16); break;
-            case 3: v = 16.0 * d.integer(0, k.height / 16); break;
+            case 0:
+                u = d.chance(0.5) ? 0.0 : k.width;
+                break;
+            case 1:
+                v = d.chance(0.5) ? 0.0 : k.height;
+                break;
+            case 2:
+                u = 16.0 * d.integer(0, k.width / 16);
+                break;
+            case 3:
+                v = 16.0 * d.integer(0, k.height / 16);
+                break;
             default:
                 u = d.chance(0.5) ? 0.0 : k.width;
                 v = d.chance(0.5) ? 0.0 : k.height;
@@ -308,8 +359,8 @@ StressCase far_away(std::uint64_t seed) {
         Gaussian g = d.ordinary();
         const double z = d.uniform(0.5e7, 1e7);
         const double spread = d.chance(0.7) ? 0.5 : 40.0;  // on screen, or far outside the frustum
-        g.position = {static_cast<float>(d.uniform(-spread, spread) * z), static_cast<float>(d.uniform(-spread, spread) * z),
-                      static_cast<float>(d.chance(0.9) ? z : -z)};
+        g.position = {static_cast<float>(d.uniform(-spread, spread) * z),
+                      static_cast<float>(d.uniform(-spread, spread) * z), static_cast<float>(d.chance(0.9) ? z : -z)};
         for (float& sc : g.scale) sc = static_cast<float>(d.log_uniform(1e4, 1e5));
         add(s, g);
     }
@@ -369,7 +420,8 @@ StressCase degenerate(std::uint64_t seed) {
             default: {  // disc whose normal (local x) is perpendicular to the ray: edge-on
                 std::array<double, 3> normal{ray[1], -ray[0], 0};
                 const double m = std::sqrt(normal[0] * normal[0] + normal[1] * normal[1]);
-                normal = m > 1e-9 ? std::array<double, 3>{normal[0] / m, normal[1] / m, 0} : std::array<double, 3>{1, 0, 0};
+                normal =
+                    m > 1e-9 ? std::array<double, 3>{normal[0] / m, normal[1] / m, 0} : std::array<double, 3>{1, 0, 0};
                 const float wide = static_cast<float>(d.log_uniform(0.05, 2.0));
                 g.scale = {static_cast<float>(d.log_uniform(1e-12, 1e-4)), wide, wide};
                 g.rotation = quaternion_x_to(normal);
@@ -386,10 +438,17 @@ StressCase invalid(std::uint64_t seed) {
         Gaussian g = d.ordinary(1.0, 8.0);
         const float bad = d.pick(std::vector<float>{kNaN, kInf, -kInf});
         switch (d.integer(0, 3)) {
-            case 0: g.position[static_cast<std::size_t>(d.integer(0, 2))] = bad; break;
-            case 1: g.scale[static_cast<std::size_t>(d.integer(0, 2))] = bad; break;
-            case 2: g.opacity = kNaN; break;
-            default: g.sh.assign(s.sh_floats_per_gaussian(), kNaN);  // colour NaN: clamped to 0 (black)
+            case 0:
+                g.position[static_cast<std::size_t>(d.integer(0, 2))] = bad;
+                break;
+            case 1:
+                g.scale[static_cast<std::size_t>(d.integer(0, 2))] = bad;
+                break;
+            case 2:
+                g.opacity = kNaN;
+                break;
+            default:
+                g.sh.assign(s.sh_floats_per_gaussian(), kNaN);  // colour NaN: clamped to 0 (black)
         }
         return g;
     });
@@ -405,7 +464,9 @@ Gaussian adversarial(Draw& d, const Intrinsics& k, int sh_degree, bool huge_colo
     int kind = d.integer(0, 11);
     if (kind == 4 && !huge_colours) kind = 11;
     switch (kind) {
-        case 0: g.scale[static_cast<std::size_t>(d.integer(0, 2))] = d.pick(std::vector<float>{1e-12f, 1e-20f, 0.0f}); break;
+        case 0:
+            g.scale[static_cast<std::size_t>(d.integer(0, 2))] = d.pick(std::vector<float>{1e-12f, 1e-20f, 0.0f});
+            break;
         case 1: {
             const float big = static_cast<float>(d.log_uniform(1e2, 1e6));
             g.scale = {big, big, d.chance(0.5) ? big : 0.1f};
@@ -425,10 +486,12 @@ Gaussian adversarial(Draw& d, const Intrinsics& k, int sh_degree, bool huge_colo
             break;
         case 4:
             g.sh.assign(sh_floats, 0.0f);
-            g.sh[static_cast<std::size_t>(d.integer(0, static_cast<int>(sh_floats) - 1))] = d.chance(0.5) ? 1e30f : -1e30f;
+            g.sh[static_cast<std::size_t>(d.integer(0, static_cast<int>(sh_floats) - 1))] =
+                d.chance(0.5) ? 1e30f : -1e30f;
             break;
         case 5: {
-            const double z = d.pick(std::vector<double>{0.0, 0.2 * (1 + 1e-4), 0.2 * (1 - 1e-4), 0.2 * (1 + 1e-2), -1.0});
+            const double z =
+                d.pick(std::vector<double>{0.0, 0.2 * (1 + 1e-4), 0.2 * (1 - 1e-4), 0.2 * (1 + 1e-2), -1.0});
             g.position = {static_cast<float>(d.uniform(-0.1, 0.1)), static_cast<float>(d.uniform(-0.1, 0.1)),
                           static_cast<float>(z)};
             for (float& s : g.scale) s = static_cast<float>(d.log_uniform(1e-4, 0.02));
@@ -461,8 +524,11 @@ Gaussian adversarial(Draw& d, const Intrinsics& k, int sh_degree, bool huge_colo
             g.rotation = quaternion_x_to(direction_to(g.position));
             break;
         }
-        case 10: g.scale = {1e-20f, 1e-20f, 1.0f}; break;
-        default: break;  // an ordinary one
+        case 10:
+            g.scale = {1e-20f, 1e-20f, 1.0f};
+            break;
+        default:
+            break;  // an ordinary one
     }
     return g;
 }
@@ -474,8 +540,8 @@ StressCase mixture(std::uint64_t seed, int count, bool huge_colours) {
     Scene s = empty_scene(d.integer(0, 3));
     const Camera cam = case_camera();
     for (int i = 0; i < count; ++i) add(s, adversarial(d, cam.intrinsics, s.sh_degree, huge_colours));
-    StressCase c = make_case(huge_colours ? "hdr mixture" : "mixture", huge_colours ? Family::hdr_mixture : Family::mixture,
-                             std::move(s), cam);
+    StressCase c = make_case(huge_colours ? "hdr mixture" : "mixture",
+                             huge_colours ? Family::hdr_mixture : Family::mixture, std::move(s), cam);
     // The mixture holds near-plane Gaussians (0.2 m +- 1e-4); with colours of 1e30 a flip at
     // the plane would be full-scale over the whole footprint.
     c.path = sideways_path(c.path.front());

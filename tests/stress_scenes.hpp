@@ -24,24 +24,24 @@ namespace catgs::test::stress {
 
 /// The case families of the issue. Each has its own error bounds per backend.
 enum class Family {
-    tiny_scales,      ///< scales 1e-12 .. 1e-45 and 0 on some or all axes
-    huge_scales,      ///< scales 1e3 .. 1e6, camera inside some of them
-    quaternions,      ///< zero, NaN, inf, denormal and non-normalised quaternions
-    opacities,        ///< logits +-100 (1.0f and 3.7e-44), exactly 1.0f, 1/255 +- 1 ulp, 0
-    huge_sh,          ///< SH coefficients of magnitude 1e30 (both signs, every degree)
-    extreme_sh,       ///< SH coefficients 1e38 (near float max), +inf, -inf, NaN
-    near_plane,       ///< at the camera centre, 0.2 +- (1e-5 .. 1e-2), behind the camera
-    image_border,     ///< means exactly on the image border and on tile boundaries
-    far_away,         ///< 10^7 m from the camera, scales up to 1e5
-    utm,              ///< scene origin and camera at 10^6 .. 10^7 m
-    camera_inside,    ///< the camera inside large Gaussians whose mean is in front of it
-    degenerate,       ///< 2D covariances that are rank one before the blur: 1e-20 x 1e-20 x 1,
-                      ///< needles seen end-on, discs seen edge-on
-    invalid,          ///< NaN / inf positions, scales, opacities
-    ties,             ///< thousands of Gaussians at exactly the same depth
-    field_of_view,    ///< a mixture seen at 5 .. 150 degrees
-    mixture,          ///< random draws from every family above in one scene, SH 1e30 excluded
-    hdr_mixture,      ///< the mixture with SH 1e30 colours included
+    tiny_scales,    ///< scales 1e-12 .. 1e-45 and 0 on some or all axes
+    huge_scales,    ///< scales 1e3 .. 1e6, camera inside some of them
+    quaternions,    ///< zero, NaN, inf, denormal and non-normalised quaternions
+    opacities,      ///< logits +-100 (1.0f and 3.7e-44), exactly 1.0f, 1/255 +- 1 ulp, 0
+    huge_sh,        ///< SH coefficients of magnitude 1e30 (both signs, every degree)
+    extreme_sh,     ///< SH coefficients 1e38 (near float max), +inf, -inf, NaN
+    near_plane,     ///< at the camera centre, 0.2 +- (1e-5 .. 1e-2), behind the camera
+    image_border,   ///< means exactly on the image border and on tile boundaries
+    far_away,       ///< 10^7 m from the camera, scales up to 1e5
+    utm,            ///< scene origin and camera at 10^6 .. 10^7 m
+    camera_inside,  ///< the camera inside large Gaussians whose mean is in front of it
+    degenerate,     ///< 2D covariances that are rank one before the blur: 1e-20 x 1e-20 x 1,
+                    ///< needles seen end-on, discs seen edge-on
+    invalid,        ///< NaN / inf positions, scales, opacities
+    ties,           ///< thousands of Gaussians at exactly the same depth
+    field_of_view,  ///< a mixture seen at 5 .. 150 degrees
+    mixture,        ///< random draws from every family above in one scene, SH 1e30 excluded
+    hdr_mixture,    ///< the mixture with SH 1e30 colours included
 };
 
 const char* family_name(Family f);

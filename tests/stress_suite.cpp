@@ -30,7 +30,9 @@ protected:
     void SetUp() override { skip_unless_available(backend()); }
 };
 
-TEST_P(StressFamilies, Family) { stress::run_family(backend(), family()); }
+TEST_P(StressFamilies, Family) {
+    stress::run_family(backend(), family());
+}
 
 std::vector<std::size_t> family_indices() {
     std::vector<std::size_t> out(stress::family_generators().size());
@@ -53,19 +55,25 @@ protected:
     void SetUp() override { skip_unless_available(backend()); }
 };
 
-TEST_P(StressProperty, RandomAdversarialMixtures) { stress::run_cases(backend(), "mixtures", stress::mixture_cases); }
+TEST_P(StressProperty, RandomAdversarialMixtures) {
+    stress::run_cases(backend(), "mixtures", stress::mixture_cases);
+}
 
 TEST_P(StressProperty, FieldOfViewFiveToHundredFiftyDegrees) {
     stress::run_cases(backend(), "field of view", stress::field_of_view_cases);
 }
 
-TEST_P(StressProperty, TinyAndOddResolutions) { stress::run_cases(backend(), "resolutions", stress::resolution_cases); }
+TEST_P(StressProperty, TinyAndOddResolutions) {
+    stress::run_cases(backend(), "resolutions", stress::resolution_cases);
+}
 
 // CATGS_STRESS_SEEDS=N build/tests/catgs_tests (or tests/catgs_gpu_tests on a GPU host)
 //   --gtest_also_run_disabled_tests --gtest_filter='*MeasureBounds*' prints the worst error
 // over N seeds (default 20) per family and configuration class, and per family and
 // configuration: the numbers each backend's bounds were set from.
-TEST_P(StressProperty, DISABLED_MeasureBounds) { stress::measure_bounds(backend()); }
+TEST_P(StressProperty, DISABLED_MeasureBounds) {
+    stress::measure_bounds(backend());
+}
 
 INSTANTIATE_TEST_SUITE_P(Backends, StressProperty, ::testing::ValuesIn(stress::stress_backend_names()),
                          [](const auto& instance) { return instance.param; });

@@ -39,9 +39,11 @@ StressCase needles_and_discs_end_on(std::uint64_t seed) {
     for (int i = 0; i < 12; ++i) {
         Gaussian g = d.ordinary();
         const float z = 2.0f + 0.1f * static_cast<float>(i);
-        g.position = {(-0.6f + 0.4f * static_cast<float>(i % 4)) * z, (-0.3f + 0.3f * static_cast<float>(i / 4)) * z, z};
+        g.position = {(-0.6f + 0.4f * static_cast<float>(i % 4)) * z, (-0.3f + 0.3f * static_cast<float>(i / 4)) * z,
+                      z};
         // Squared in float, unlike direction_to: a seed logged by earlier runs replays the same scene.
-        const double n = std::sqrt(g.position[0] * g.position[0] + g.position[1] * g.position[1] + g.position[2] * g.position[2]);
+        const double n =
+            std::sqrt(g.position[0] * g.position[0] + g.position[1] * g.position[1] + g.position[2] * g.position[2]);
         const std::array<double, 3> ray{g.position[0] / n, g.position[1] / n, g.position[2] / n};
         if (i % 2 == 0) {
             g.scale = {30.0f, 1e-3f, 1e-3f};  // needle along the line of sight
@@ -83,17 +85,26 @@ Scene local_gaussians(std::uint64_t seed, const Camera& cam, int count) {
     const Intrinsics& k = cam.intrinsics;
     Scene scene = empty_scene(1);
     for (int i = 0; i < count; ++i) {
-        const double u = d.pick(std::vector<double>{0.0, 16.0, d.uniform(0, k.width), 0.5 * k.width, k.width - 16.0, 1.0 * k.width});
+        const double u =
+            d.pick(std::vector<double>{0.0, 16.0, d.uniform(0, k.width), 0.5 * k.width, k.width - 16.0, 1.0 * k.width});
         const double v = d.pick(std::vector<double>{0.0, d.uniform(0, k.height), 0.5 * k.height, 1.0 * k.height});
         const double z = d.uniform(0.3, 50), sigma_px = d.log_uniform(0.3, 40);
         Gaussian g = d.ordinary();
-        g.position = {static_cast<float>((u - k.cx) / k.fx * z), static_cast<float>((v - k.cy) / k.fy * z), static_cast<float>(z)};
+        g.position = {static_cast<float>((u - k.cx) / k.fx * z), static_cast<float>((v - k.cy) / k.fy * z),
+                      static_cast<float>(z)};
         for (float& sc : g.scale) sc = static_cast<float>(sigma_px * z / k.fx * d.uniform(0.5, 1.5));
         switch (i % 4) {
-            case 0: g.opacity = 1.0f; break;
-            case 1: g.scale[0] = 1e-12f; break;
-            case 2: g.scale = {0, 0, 0}; break;
-            default: break;
+            case 0:
+                g.opacity = 1.0f;
+                break;
+            case 1:
+                g.scale[0] = 1e-12f;
+                break;
+            case 2:
+                g.scale = {0, 0, 0};
+                break;
+            default:
+                break;
         }
         add(scene, g);
     }
@@ -107,15 +118,18 @@ std::vector<std::array<int, 4>> footprint_boxes(const Scene& scene, const Camera
     std::vector<std::array<int, 4>> boxes;
     const std::size_t stride = scene.sh_floats_per_gaussian();
     for (std::size_t i = 0; i < scene.count(); ++i) {
-        const GaussianRef g{&scene.positions[3 * i], &scene.scales[3 * i], &scene.rotations[4 * i], scene.opacities[i],
-                            &scene.sh[stride * i], scene.sh_degree};
+        const GaussianRef g{&scene.positions[3 * i], &scene.scales[3 * i],  &scene.rotations[4 * i],
+                            scene.opacities[i],      &scene.sh[stride * i], scene.sh_degree};
         Projected<double> p;
         if (!project_gaussian(g, view, p)) continue;
         const Vec2<double> e = footprint_extent(p, Culling::opacity_aware);
         if (!(e.x >= 0)) continue;
-        auto clampi = [](double v, int hi) { return static_cast<int>(std::min(std::max(v, 0.0), static_cast<double>(hi))); };
-        const std::array<int, 4> b{clampi(std::floor(p.mean.x - e.x) - margin, w), clampi(std::floor(p.mean.y - e.y) - margin, h),
-                                   clampi(std::ceil(p.mean.x + e.x) + margin, w), clampi(std::ceil(p.mean.y + e.y) + margin, h)};
+        auto clampi = [](double v, int hi) {
+            return static_cast<int>(std::min(std::max(v, 0.0), static_cast<double>(hi)));
+        };
+        const std::array<int, 4> b{
+            clampi(std::floor(p.mean.x - e.x) - margin, w), clampi(std::floor(p.mean.y - e.y) - margin, h),
+            clampi(std::ceil(p.mean.x + e.x) + margin, w), clampi(std::ceil(p.mean.y + e.y) + margin, h)};
         if (b[2] > b[0] && b[3] > b[1]) boxes.push_back(b);
     }
     for (bool merged = true; merged;) {

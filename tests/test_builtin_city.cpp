@@ -13,13 +13,14 @@
 #include "catgs/error.hpp"
 #include "catgs/math.hpp"
 
-
 namespace {
 
 using catgs::CityParams;
 using catgs::Scene;
 
-Scene city(std::uint64_t gaussians, std::uint64_t seed = 1) { return catgs::make_city(CityParams{gaussians, seed}); }
+Scene city(std::uint64_t gaussians, std::uint64_t seed = 1) {
+    return catgs::make_city(CityParams{gaussians, seed});
+}
 
 template <typename T>
 bool bit_identical(const std::vector<T>& a, const std::vector<T>& b) {
@@ -135,7 +136,8 @@ TEST(BuiltinCity, GroundIsCoveredWithoutHoles) {
         };
         std::unordered_map<long long, std::vector<Flat>> grid;
         const auto key = [](double x, double y) {
-            return static_cast<long long>(std::floor(x / kCell)) * 100000 + static_cast<long long>(std::floor(y / kCell));
+            return static_cast<long long>(std::floor(x / kCell)) * 100000 +
+                   static_cast<long long>(std::floor(y / kCell));
         };
         for (std::size_t i = 0; i < s.count(); ++i) {
             const double x = s.positions[3 * i], y = s.positions[3 * i + 1];
@@ -146,7 +148,8 @@ TEST(BuiltinCity, GroundIsCoveredWithoutHoles) {
             double cov[2][2] = {};
             for (int p = 0; p < 2; ++p)
                 for (int q = 0; q < 2; ++q)
-                    for (int k = 0; k < 3; ++k) cov[p][q] += r.m[p][k] * r.m[q][k] * s.scales[3 * i + k] * s.scales[3 * i + k];
+                    for (int k = 0; k < 3; ++k)
+                        cov[p][q] += r.m[p][k] * r.m[q][k] * s.scales[3 * i + k] * s.scales[3 * i + k];
             const double det = cov[0][0] * cov[1][1] - cov[0][1] * cov[0][1];
             grid[key(x, y)].push_back({x, y, cov[1][1] / det, -cov[0][1] / det, cov[0][0] / det, s.opacities[i]});
         }

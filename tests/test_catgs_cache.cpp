@@ -57,7 +57,9 @@ Scene small_city(const std::string& what) {
 }
 
 /// The image of the path tests: small enough to render every frame of a path twice.
-Intrinsics path_intrinsics() { return intrinsics_from_fov(320, 180, 70.0); }
+Intrinsics path_intrinsics() {
+    return intrinsics_from_fov(320, 180, 70.0);
+}
 
 /// The speculative cache over a fixed window of 4 frames.
 RenderOptions fixed_window_cache() {
@@ -144,7 +146,8 @@ TEST(CatgsCache, AccuracyBarOverUavPaths) {
 // the re-sort must remove the difference.
 TEST(CatgsCache, DepthOrderReuseErrorIsMeasuredAndResortRemovesIt) {
     const Scene city = small_city("depth order reuse");
-    const auto cameras = make_trajectory("builtin:orbit?frames=24&altitude=60&speed=12", city.bounds, path_intrinsics());
+    const auto cameras =
+        make_trajectory("builtin:orbit?frames=24&altitude=60&speed=12", city.bounds, path_intrinsics());
     RenderOptions reuse = fixed_window_cache();
     reuse.catgs.resort_cached = false;
     RenderOptions resort = reuse;
@@ -326,7 +329,8 @@ TEST(CatgsCache, HoverUsesLongWindowsAndLeavingTheEnvelopeStartsAKeyFrame) {
 
 TEST(CatgsCache, FlightPlanHintsReplacePrediction) {
     const Scene city = small_city("flight plan");
-    const auto cameras = make_trajectory("builtin:flythrough?frames=20&altitude=40&speed=20", city.bounds, path_intrinsics());
+    const auto cameras =
+        make_trajectory("builtin:flythrough?frames=20&altitude=40&speed=20", city.bounds, path_intrinsics());
     const RenderOptions o = fixed_window_cache();
     CpuRenderer<float> renderer, full;
     ImageF a, b;
@@ -361,8 +365,8 @@ TEST(CatgsCache, PredictionExtrapolatesConstantMotion) {
     ASSERT_EQ(future.size(), 3u);
     for (int k = 0; k < 3; ++k) {
         const double yaw = 0.05 * (3 + k);
-        const Pose truth = look_at({2.0 * (3 + k), 0, 50}, {2.0 * (3 + k) + 30 * std::cos(yaw), 30 * std::sin(yaw), 0},
-                                   {0, 0, 1});
+        const Pose truth =
+            look_at({2.0 * (3 + k), 0, 50}, {2.0 * (3 + k) + 30 * std::cos(yaw), 30 * std::sin(yaw), 0}, {0, 0, 1});
         const auto c = camera_centre(future[k].pose);
         EXPECT_NEAR(c[0], 2.0 * (3 + k), 1e-9);
         EXPECT_NEAR(future[k].timestamp, 0.1 * (3 + k), 1e-12);

@@ -79,8 +79,8 @@ TEST(ChunkPartition, ReordersWithoutLosingAGaussianAndBoundsEveryMember) {
     // Chunks along the octree are compact: a chunk's box stays inside one octree cell, so the
     // boxes cover the scene's box a few times at most (measured: 1.7 for 24 chunks), where
     // the file order gives every chunk nearly the whole box (C times it).
-    const double box = (s.bounds.max[0] - s.bounds.min[0]) * (s.bounds.max[1] - s.bounds.min[1]) *
-                       (s.bounds.max[2] - s.bounds.min[2]);
+    const double box =
+        (s.bounds.max[0] - s.bounds.min[0]) * (s.bounds.max[1] - s.bounds.min[1]) * (s.bounds.max[2] - s.bounds.min[2]);
     std::cout << "[chunks] " << s.chunks.size() << " chunks, " << s.count() / static_cast<double>(s.chunks.size())
               << " Gaussians each on average; their boxes sum to " << chunk_volume / box << " of the scene box"
               << std::endl;
@@ -114,7 +114,9 @@ TEST(ChunkPartition, InconsistentChunksAreRefusedWithTheReason) {
         gap.check_consistent("scene");
         FAIL() << "a gap between chunks was accepted";
     } catch (const Error& e) {
-        EXPECT_STREQ(e.what(), "scene: chunk 1 covers [1025, 2048), expected to start at 1024 with 1..1024 of the 2500 Gaussians");
+        EXPECT_STREQ(
+            e.what(),
+            "scene: chunk 1 covers [1025, 2048), expected to start at 1024 with 1..1024 of the 2500 Gaussians");
     }
     Scene short_cover = s;
     short_cover.chunks.pop_back();
@@ -159,7 +161,8 @@ TEST(ChunkCulling, SkippedChunksHoldNoPairOfAnyTile) {
             off.chunk_culling = false;
             CpuRenderer<float> a(2), b(2);
             const Rendered with = render(a, scene, cam, on), without = render(b, scene, cam, off);
-            ASSERT_EQ(with.keys, without.keys) << culling_name(mode) << " camera " << k << " (CATGS_TEST_SEED=" << seed << ")";
+            ASSERT_EQ(with.keys, without.keys)
+                << culling_name(mode) << " camera " << k << " (CATGS_TEST_SEED=" << seed << ")";
             ASSERT_EQ(with.values, without.values) << culling_name(mode) << " camera " << k;
             ASSERT_EQ(with.image.rgb, without.image.rgb) << culling_name(mode) << " camera " << k;
             EXPECT_EQ(without.stats.chunks_culled, 0u);

@@ -23,12 +23,13 @@ TEST(CliOptions, ReuseOrderDefaultReadsAsAPersonWritesIt) {
     EXPECT_EQ(flags.reuse_order_max_deg, catgs::cli::PipelineFlags::angle_name(catgs::kDefaultReuseOrderMaxAngle));
     catgs::RenderOptions options;
     catgs::cli::apply_pipeline_flags(flags, options);
-    EXPECT_DOUBLE_EQ(options.catgs.reuse_order_max_angle, *catgs::parse_degrees(flags.reuse_order_max_deg) * catgs::kPi / 180.0);
+    EXPECT_DOUBLE_EQ(options.catgs.reuse_order_max_angle,
+                     *catgs::parse_degrees(flags.reuse_order_max_deg) * catgs::kPi / 180.0);
     EXPECT_NEAR(options.catgs.reuse_order_max_angle, catgs::kDefaultReuseOrderMaxAngle, 1e-12);
 
     // Other values show the same way; "any" as itself.
-    for (const auto& [value, shown] : {std::pair{"180", "TEXT=180 (3.14 rad)"}, std::pair{"0.05", "TEXT=0.05 (0.000873 rad)"},
-                                       std::pair{"any", "TEXT=any"}}) {
+    for (const auto& [value, shown] : {std::pair{"180", "TEXT=180 (3.14 rad)"},
+                                       std::pair{"0.05", "TEXT=0.05 (0.000873 rad)"}, std::pair{"any", "TEXT=any"}}) {
         CLI::App other{"test"};
         catgs::cli::PipelineFlags f;
         f.reuse_order_max_deg = value;

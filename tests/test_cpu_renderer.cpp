@@ -90,7 +90,7 @@ TEST(CpuRendererAnalytic, IsotropicGaussianMatchesClosedForm) {
 // near one in front whatever their order in the scene.
 TEST(CpuRendererAnalytic, TwoGaussiansCompositeInDepthOrder) {
     const Camera cam = test::forward_camera(32, 32, 40.0);
-    Scene scene = single_gaussian({0, 0, 9}, 0.5f, 0.7f, {-1.0f, 1.5f, -1.0f});  // far, green
+    Scene scene = single_gaussian({0, 0, 9}, 0.5f, 0.7f, {-1.0f, 1.5f, -1.0f});   // far, green
     append(scene, single_gaussian({0, 0, 4}, 0.2f, 0.6f, {1.5f, -1.0f, -1.0f}));  // near, red
     const std::array<float, 3> bg{0.0f, 0.0f, 1.0f};
     const ImageF image = render<double>(scene, cam, Culling::exact, bg);
@@ -169,12 +169,15 @@ TEST(CpuRendererAnalytic, TruncatedShRendersAsZeroedHigherCoefficients) {
             for (std::size_t k = 3u * static_cast<std::size_t>((degree + 1) * (degree + 1)); k < stride; ++k)
                 zeroed.sh[i * stride + k] = 0.0f;
         EXPECT_EQ(render<float>(truncated, camera, Culling::opacity_aware).rgb,
-                  render<float>(zeroed, camera, Culling::opacity_aware).rgb) << "degree " << degree;
+                  render<float>(zeroed, camera, Culling::opacity_aware).rgb)
+            << "degree " << degree;
         EXPECT_EQ(render<double>(truncated, camera, Culling::opacity_aware).rgb,
-                  render<double>(zeroed, camera, Culling::opacity_aware).rgb) << "degree " << degree;
+                  render<double>(zeroed, camera, Culling::opacity_aware).rgb)
+            << "degree " << degree;
         // ... and it is not the full scene's image (the random scene has view-dependent colour).
         EXPECT_NE(render<float>(truncated, camera, Culling::opacity_aware).rgb,
-                  render<float>(full, camera, Culling::opacity_aware).rgb) << "degree " << degree;
+                  render<float>(full, camera, Culling::opacity_aware).rgb)
+            << "degree " << degree;
     }
     Scene same = full;
     truncate_sh(same, 3);
@@ -268,8 +271,8 @@ RandomCase random_case(const std::string& what, std::size_t count = 1500) {
 TEST(CpuRendererCompare, FloatMatchesDouble) {
     const RandomCase c = random_case("float vs double");
     for (Culling mode : {Culling::exact, Culling::opacity_aware}) {
-        const ImageError e = compare(to_rgb8(render<float>(c.scene, c.camera, mode)),
-                                     to_rgb8(render<double>(c.scene, c.camera, mode)));
+        const ImageError e =
+            compare(to_rgb8(render<float>(c.scene, c.camera, mode)), to_rgb8(render<double>(c.scene, c.camera, mode)));
         EXPECT_GE(e.psnr, 50.0) << culling_name(mode);
         EXPECT_LE(e.max_abs, 2) << culling_name(mode);
     }
@@ -417,8 +420,8 @@ void check_visible_box(const char* name) {
     }
     EXPECT_GT(drawn, 1000u);
     EXPECT_GT(static_cast<double>(skipped), 0.3 * static_cast<double>(in_tiles)) << name;
-    std::printf("%s: %zu drawn pixels inside their boxes; the boxes skip %.1f%% of the pixels of touched tiles\n",
-                name, drawn, 100.0 * static_cast<double>(skipped) / static_cast<double>(in_tiles));
+    std::printf("%s: %zu drawn pixels inside their boxes; the boxes skip %.1f%% of the pixels of touched tiles\n", name,
+                drawn, 100.0 * static_cast<double>(skipped) / static_cast<double>(in_tiles));
 }
 
 TEST(CpuRendererCompare, VisibleBoxHoldsEveryDrawnPixel) {
@@ -450,7 +453,7 @@ TEST(CpuRendererCompare, DeterministicAcrossRunsAndThreadCounts) {
 
 // Ties in depth are resolved by Gaussian index: the lower index is in front.
 TEST(CpuRendererCompare, EqualDepthsOrderByIndex) {
-    Scene scene = single_gaussian({0, 0, 5}, 0.5f, 0.9f, {1.5f, -1, -1});  // red, index 0
+    Scene scene = single_gaussian({0, 0, 5}, 0.5f, 0.9f, {1.5f, -1, -1});   // red, index 0
     append(scene, single_gaussian({0, 0, 5}, 0.5f, 0.9f, {-1, 1.5f, -1}));  // green, index 1
     const Camera cam = test::forward_camera(16, 16, 40.0);
     const ImageF image = render<float>(scene, cam, Culling::opacity_aware);

@@ -206,8 +206,7 @@ TEST(SceneIoPly, StderrProgressPrintsTheFinalLineOnce) {
     const std::string line = "loading " + std::filesystem::path(path).filename().string() + ": 100%\n";
     ASSERT_NE(out.find(line), std::string::npos) << out;
     EXPECT_EQ(out.find(line, out.find(line) + 1), std::string::npos) << out;
-    EXPECT_EQ(out.substr(out.find("another step")),
-              "another step:  50%\nanother step: 100%\nanother step: 100%\n");
+    EXPECT_EQ(out.substr(out.find("another step")), "another step:  50%\nanother step: 100%\nanother step: 100%\n");
 }
 
 TEST(SceneIoPly, ShDegreeOneChannelMajorByHand) {

@@ -24,7 +24,9 @@ using namespace catgs::scene_io_test;
 
 /// Rounded to a multiple of 2^-20 so that origin +- extent is exact in double and the reader's
 /// bounds centre reproduces the origin bit for bit.
-double grid(double v) { return std::round(std::ldexp(v, 20)) / std::ldexp(1.0, 20); }
+double grid(double v) {
+    return std::round(std::ldexp(v, 20)) / std::ldexp(1.0, 20);
+}
 
 catgs::Scene random_scene(std::mt19937_64& rng, int degree, std::array<double, 3> origin, float extent, std::size_t n) {
     catgs::Scene s;

@@ -60,8 +60,10 @@ EwaReference ewa_reference(const GaussianRef& g, const Camera& camera) {
     out.depth = pc[2];
     // The clamp of the Jacobian's direction (View::clamp_*): the image plus 0.15 per side.
     const double slack = kJacobianClampFactor - 1.0;
-    const double lim_l = k.cx / k.fx + slack * 0.5 * k.width / k.fx, lim_r = (k.width - k.cx) / k.fx + slack * 0.5 * k.width / k.fx;
-    const double lim_t = k.cy / k.fy + slack * 0.5 * k.height / k.fy, lim_b = (k.height - k.cy) / k.fy + slack * 0.5 * k.height / k.fy;
+    const double lim_l = k.cx / k.fx + slack * 0.5 * k.width / k.fx,
+                 lim_r = (k.width - k.cx) / k.fx + slack * 0.5 * k.width / k.fx;
+    const double lim_t = k.cy / k.fy + slack * 0.5 * k.height / k.fy,
+                 lim_b = (k.height - k.cy) / k.fy + slack * 0.5 * k.height / k.fy;
     const double tx = std::clamp(pc[0] / pc[2], -lim_l, lim_r), ty = std::clamp(pc[1] / pc[2], -lim_t, lim_b);
     const double j[2][3] = {{k.fx / pc[2], 0, -k.fx * tx / pc[2]}, {0, k.fy / pc[2], -k.fy * ty / pc[2]}};
     const Mat3<double> sigma = covariance_3d<double>(g.scale, g.rotation);
@@ -152,20 +154,24 @@ TEST(StageProject, FloatGeometryMatchesDoubleWithinMeasuredTolerance) {
             ASSERT_EQ(f, d) << "gaussian " << i << " at depth " << pd.depth << " (CATGS_TEST_SEED=" << seed << ")";
             if (!d) continue;
             ++compared;
-            const double p = std::sqrt(g.positions[3 * i] * g.positions[3 * i] + g.positions[3 * i + 1] * g.positions[3 * i + 1] +
-                                       g.positions[3 * i + 2] * g.positions[3 * i + 2]);
+            const double p =
+                std::sqrt(g.positions[3 * i] * g.positions[3 * i] + g.positions[3 * i + 1] * g.positions[3 * i + 1] +
+                          g.positions[3 * i + 2] * g.positions[3 * i + 2]);
             // pc = R p + t rounds by eps (|p| + |t|), and the mean divides it by the depth.
             const double off_axis = std::fabs(pd.mean.x - vd.cx) + std::fabs(pd.mean.y - vd.cy);
-            const double mean_scale = (std::max(vd.fx, vd.fy) + off_axis) * (1 + p + eye) / pd.depth + std::fabs(pd.mean.x) +
-                                      std::fabs(pd.mean.y);
-            const double mean_err = std::max(std::fabs(pf.mean.x - pd.mean.x), std::fabs(pf.mean.y - pd.mean.y)) / mean_scale;
+            const double mean_scale = (std::max(vd.fx, vd.fy) + off_axis) * (1 + p + eye) / pd.depth +
+                                      std::fabs(pd.mean.x) + std::fabs(pd.mean.y);
+            const double mean_err =
+                std::max(std::fabs(pf.mean.x - pd.mean.x), std::fabs(pf.mean.y - pd.mean.y)) / mean_scale;
             const double max_scale = std::max({g.scales[3 * i], g.scales[3 * i + 1], g.scales[3 * i + 2]});
             const double reach = std::max(vd.fx, vd.fy) * max_scale / pd.depth;
-            const double cov_scale = std::max({std::fabs(pd.cov.x), std::fabs(pd.cov.z), reach * reach + kCovarianceBlur});
+            const double cov_scale =
+                std::max({std::fabs(pd.cov.x), std::fabs(pd.cov.z), reach * reach + kCovarianceBlur});
             const double cov_err = std::max({std::fabs(pf.cov.x - pd.cov.x), std::fabs(pf.cov.y - pd.cov.y),
-                                             std::fabs(pf.cov.z - pd.cov.z)}) / cov_scale;
-            const double conic_err =
-                std::max({std::fabs(pf.conic.x - pd.conic.x), std::fabs(pf.conic.y - pd.conic.y), std::fabs(pf.conic.z - pd.conic.z)});
+                                             std::fabs(pf.cov.z - pd.cov.z)}) /
+                                   cov_scale;
+            const double conic_err = std::max({std::fabs(pf.conic.x - pd.conic.x), std::fabs(pf.conic.y - pd.conic.y),
+                                               std::fabs(pf.conic.z - pd.conic.z)});
             worst_mean = std::max(worst_mean, mean_err);
             worst_cov = std::max(worst_cov, cov_err);
             worst_conic = std::max(worst_conic, conic_err);
@@ -198,9 +204,12 @@ TileRect reference_rect(const Projected<double>& g, Culling mode, int tiles_x, i
         const double lambda = mid + std::sqrt(std::max(mid * mid - det, kBBoxEigenFloor));
         const double r = std::ceil(3 * std::sqrt(lambda)) + guard;
         const double px = g.mean.x - 0.5, py = g.mean.y - 0.5;
-        auto clamp_tile = [](double v, int tiles) { return static_cast<int>(std::clamp(std::floor(v), 0.0, static_cast<double>(tiles))); };
+        auto clamp_tile = [](double v, int tiles) {
+            return static_cast<int>(std::clamp(std::floor(v), 0.0, static_cast<double>(tiles)));
+        };
         return {clamp_tile((px - r) / kTileSize, tiles_x), clamp_tile((py - r) / kTileSize, tiles_y),
-                clamp_tile((px + r + kTileSize - 1) / kTileSize, tiles_x), clamp_tile((py + r + kTileSize - 1) / kTileSize, tiles_y)};
+                clamp_tile((px + r + kTileSize - 1) / kTileSize, tiles_x),
+                clamp_tile((py + r + kTileSize - 1) / kTileSize, tiles_y)};
     }
     const double level = 2 * std::log(255.0 * g.opacity) * 1.001 + 1e-3;
     if (!(level > 0)) return {0, 0, 0, 0};
@@ -250,7 +259,8 @@ TEST(StageTiles, TileRectIsTheTilesOfTheFootprint) {
     int compared = 0, in_band = 0;
     double closest_flip = std::numeric_limits<double>::infinity();
     for (int i = 0; i < 20000; ++i) {
-        const int width = static_cast<int>(stage::uniform(rng, 1, 2000)), height = static_cast<int>(stage::uniform(rng, 1, 1200));
+        const int width = static_cast<int>(stage::uniform(rng, 1, 2000)),
+                  height = static_cast<int>(stage::uniform(rng, 1, 1200));
         const int tiles_x = tiles_for(width), tiles_y = tiles_for(height);
         const Projected<float> pf = stage::random_projected<float>(rng, width, height);
         const Projected<double> pd = stage::widened(pf);
@@ -273,7 +283,8 @@ TEST(StageTiles, TileRectIsTheTilesOfTheFootprint) {
         EXPECT_TRUE(exact.x0 == 0 && exact.y0 == 0 && exact.x1 == tiles_x && exact.y1 == tiles_y);
     }
     std::cout << "[stage] tile_rect: " << compared << " compared, " << in_band << " within 1e-3 px of a tile boundary, "
-              << "float differs at most " << (std::isinf(closest_flip) ? 0 : closest_flip) << " px from one" << std::endl;
+              << "float differs at most " << (std::isinf(closest_flip) ? 0 : closest_flip) << " px from one"
+              << std::endl;
     EXPECT_LT(in_band, compared / 100);
 }
 
@@ -299,7 +310,8 @@ double reference_min_q(const Projected<double>& g, int tx, int ty, int width, in
         const double s = 0.5 * (lo + hi);
         return std::min({q(ax + s * (bx - ax), ay + s * (by - ay)), q(ax, ay), q(bx, by)});
     };
-    return std::min({edge_min(x0, y0, x1, y0), edge_min(x0, y1, x1, y1), edge_min(x0, y0, x0, y1), edge_min(x1, y0, x1, y1)});
+    return std::min(
+        {edge_min(x0, y0, x1, y0), edge_min(x0, y1, x1, y1), edge_min(x0, y0, x0, y1), edge_min(x1, y0, x1, y1)});
 }
 
 // Double decides as its reference except within 1e-9 (relative) of the level; float as double
@@ -311,7 +323,8 @@ TEST(StageTiles, EllipseTouchesTileWhereTheEllipseReachesTheTilesPixelCentres) {
     int touched = 0, missed = 0, double_band = 0, float_band = 0;
     double widest_flip = 0;
     for (int i = 0; i < 1500; ++i) {
-        const int width = static_cast<int>(stage::uniform(rng, 17, 400)), height = static_cast<int>(stage::uniform(rng, 17, 300));
+        const int width = static_cast<int>(stage::uniform(rng, 17, 400)),
+                  height = static_cast<int>(stage::uniform(rng, 17, 300));
         const Projected<float> pf = stage::random_projected<float>(rng, width, height);
         const Projected<double> pd = stage::widened(pf);
         const float level_f = opacity_level(pf.opacity);
@@ -330,8 +343,8 @@ TEST(StageTiles, EllipseTouchesTileWhereTheEllipseReachesTheTilesPixelCentres) {
                     ++double_band;
                     continue;
                 }
-                EXPECT_EQ(d, min_q <= level) << "case " << i << " tile " << tx << "," << ty << ": min q " << min_q << ", level "
-                                             << level << " (CATGS_TEST_SEED=" << seed << ")";
+                EXPECT_EQ(d, min_q <= level) << "case " << i << " tile " << tx << "," << ty << ": min q " << min_q
+                                             << ", level " << level << " (CATGS_TEST_SEED=" << seed << ")";
                 if (margin < 1e-4) {
                     ++float_band;
                     continue;
@@ -367,7 +380,7 @@ TEST(StageKeys, KeysSortByTileThenDepth) {
     std::vector<std::uint64_t> keys;
     for (float d : depths) {
         const double pick = stage::uniform(rng, 0, 1);
-        const std::uint32_t tile = pick < 0.3 ? static_cast<std::uint32_t>(stage::uniform(rng, 0, 4))
+        const std::uint32_t tile = pick < 0.3    ? static_cast<std::uint32_t>(stage::uniform(rng, 0, 4))
                                    : pick < 0.35 ? 0xFFFFFFFFu
                                                  : static_cast<std::uint32_t>(stage::uniform(rng, 0, 4294967295.0));
         tiles.push_back(tile);
@@ -448,8 +461,10 @@ TEST(StageMerge, CompositeOfPartialsIsTheBlendOfTheWholeList) {
             worst_double = std::max(worst_double, std::fabs(dd[c]));
             worst_float = std::max(worst_float, std::fabs(df[c]));
         }
-        ASSERT_LT(worst_double, 1e-12) << "list " << i << " of " << l.alphas.size() << ", k " << k << " (CATGS_TEST_SEED=" << seed << ")";
-        ASSERT_LT(worst_float, 1e-5) << "list " << i << " of " << l.alphas.size() << ", k " << k << " (CATGS_TEST_SEED=" << seed << ")";
+        ASSERT_LT(worst_double, 1e-12) << "list " << i << " of " << l.alphas.size() << ", k " << k
+                                       << " (CATGS_TEST_SEED=" << seed << ")";
+        ASSERT_LT(worst_float, 1e-5) << "list " << i << " of " << l.alphas.size() << ", k " << k
+                                     << " (CATGS_TEST_SEED=" << seed << ")";
     }
     std::cout << "[stage] merge vs whole list: double " << worst_double << ", float " << worst_float << std::endl;
 }
@@ -498,8 +513,10 @@ TEST(StageEnvelope, FootprintBoundHoldsForEveryOrientation) {
                 if (mode == Culling::opacity_aware) {
                     // Both scale the projected sigma by sqrt(level); the extent's sigma carries the
                     // Jacobian's row norm (f / z) sqrt(1 + t^2), the bound's f / z alone.
-                    EXPECT_LE(e.x, b * std::sqrt(1 + tx * tx) * (1 + 1e-9)) << "gaussian " << i << " (CATGS_TEST_SEED=" << seed << ")";
-                    EXPECT_LE(e.y, b * std::sqrt(1 + ty * ty) * (1 + 1e-9)) << "gaussian " << i << " (CATGS_TEST_SEED=" << seed << ")";
+                    EXPECT_LE(e.x, b * std::sqrt(1 + tx * tx) * (1 + 1e-9))
+                        << "gaussian " << i << " (CATGS_TEST_SEED=" << seed << ")";
+                    EXPECT_LE(e.y, b * std::sqrt(1 + ty * ty) * (1 + 1e-9))
+                        << "gaussian " << i << " (CATGS_TEST_SEED=" << seed << ")";
                 }
                 EXPECT_GE(b, (mode == Culling::bbox3sigma ? 3.0 : std::sqrt(std::max(0.0, opacity_level(p.opacity)))) *
                                  std::sqrt(kCovarianceBlur) * (1 - 1e-12));
@@ -515,7 +532,8 @@ TEST(StageEnvelope, FootprintBoundHoldsForEveryOrientation) {
                 float rotation[4], position[3];
                 for (int a = 0; a < 4; ++a) rotation[a] = static_cast<float>(q[a] / std::sqrt(norm));
                 const std::array<double, 3> c = camera_centre(camera.pose);
-                for (int a = 0; a < 3; ++a) position[a] = static_cast<float>(c[a] + camera.pose.rotation[6 + a] * p.depth);
+                for (int a = 0; a < 3; ++a)
+                    position[a] = static_cast<float>(c[a] + camera.pose.rotation[6 + a] * p.depth);
                 const GaussianRef turned{position, &g.scales[3 * i], rotation, g.opacities[i], nullptr, 0};
                 Projected<double> pt;
                 if (!project_geometry(turned, view, pt)) continue;
@@ -528,7 +546,8 @@ TEST(StageEnvelope, FootprintBoundHoldsForEveryOrientation) {
                         EXPECT_LE(3 * sigma, b * (1 + 1e-6)) << "gaussian " << i << " (CATGS_TEST_SEED=" << seed << ")";
                     } else {
                         const Vec2<double> e = footprint_extent(pt, mode);
-                        EXPECT_LE(std::max(e.x, e.y), b * (1 + 1e-6)) << "gaussian " << i << " (CATGS_TEST_SEED=" << seed << ")";
+                        EXPECT_LE(std::max(e.x, e.y), b * (1 + 1e-6))
+                            << "gaussian " << i << " (CATGS_TEST_SEED=" << seed << ")";
                     }
                 }
             }
@@ -551,7 +570,8 @@ TEST(StageEnvelope, UncachedCanEnterWithinReachOfTheImage) {
         const View<float> vf = make_view<float>(camera, {0, 0, 0});
         const Projected<float> pf = stage::random_projected<float>(rng, vd.width, vd.height);
         const Projected<double> pd = stage::widened(pf);
-        const float guard = static_cast<float>(stage::uniform(rng, 0, 4)), move = static_cast<float>(stage::uniform(rng, 0, 0.5));
+        const float guard = static_cast<float>(stage::uniform(rng, 0, 4)),
+                    move = static_cast<float>(stage::uniform(rng, 0, 0.5));
         const float max_scale = static_cast<float>(stage::log_uniform(rng, 1e-4, 10));
         for (Culling mode : {Culling::bbox3sigma, Culling::opacity_aware}) {
             double bd = -1;
@@ -572,17 +592,20 @@ TEST(StageEnvelope, UncachedCanEnterWithinReachOfTheImage) {
             // The decision's margin: how far the mean is outside the image, against the reach.
             const double focal = std::max(vd.fx, vd.fy), b = footprint_bound_px(pd, mode, double(max_scale), focal);
             const double t = max_clamp_tangent(vd);
-            const double reach = guard * (1 + b / focal) + focal * (1 + t * t) * move / pd.depth + b * (1 + move / pd.depth);
+            const double reach =
+                guard * (1 + b / focal) + focal * (1 + t * t) * move / pd.depth + b * (1 + move / pd.depth);
             const double away = std::max({-pd.mean.x, pd.mean.x - vd.width, -pd.mean.y, pd.mean.y - vd.height});
             const double lo = -kClampRegionMargin, hi = 1 + kClampRegionMargin;
-            const double region = std::min({std::fabs(pd.mean.x - lo * vd.width), std::fabs(pd.mean.x - hi * vd.width),
-                                            std::fabs(pd.mean.y - lo * vd.height), std::fabs(pd.mean.y - hi * vd.height)});
+            const double region =
+                std::min({std::fabs(pd.mean.x - lo * vd.width), std::fabs(pd.mean.x - hi * vd.width),
+                          std::fabs(pd.mean.y - lo * vd.height), std::fabs(pd.mean.y - hi * vd.height)});
             if (f != d) widest_flip = std::max(widest_flip, std::min(std::fabs(away - reach) / (1 + reach), region));
             if (std::fabs(away - reach) < 1e-4 * (1 + reach) || region < 1e-3) {
                 ++band;
                 continue;
             }
-            EXPECT_EQ(d, in_clamp_region(vd, pd.mean) && away <= reach) << "case " << i << " (CATGS_TEST_SEED=" << seed << ")";
+            EXPECT_EQ(d, in_clamp_region(vd, pd.mean) && away <= reach)
+                << "case " << i << " (CATGS_TEST_SEED=" << seed << ")";
             EXPECT_EQ(f, d) << "case " << i << " (CATGS_TEST_SEED=" << seed << ")";
         }
     }

@@ -64,7 +64,8 @@ TEST(ClampRegion, IsTheImagePlusFifteenPercentPerSide) {
     // The projection's clamp edge lands on the region's edge (centred principal point).
     EXPECT_NEAR(v.cx + v.fx * v.clamp_right, 1.15 * v.width, 1e-9);
     EXPECT_NEAR(v.cy - v.fy * v.clamp_top, -0.15 * v.height, 1e-9);
-    EXPECT_EQ(max_clamp_tangent(v), std::max(std::max(v.clamp_left, v.clamp_right), std::max(v.clamp_top, v.clamp_bottom)));
+    EXPECT_EQ(max_clamp_tangent(v),
+              std::max(std::max(v.clamp_left, v.clamp_right), std::max(v.clamp_top, v.clamp_bottom)));
 }
 
 Projected<double> round_gaussian(double x, double y, double variance, double opacity, double depth) {

@@ -28,18 +28,20 @@ namespace {
 
 using test::stress::Bound;
 using test::stress::Config;
+using test::stress::count_nonfinite;
 using test::stress::Family;
 using test::stress::Frame;
-using test::stress::Mode;
-using test::stress::StressCase;
-using test::stress::count_nonfinite;
 using test::stress::kBackground;
+using test::stress::Mode;
 using test::stress::options_for;
 using test::stress::seed_note;
+using test::stress::StressCase;
 namespace stress = test::stress;
 
 /// Every backend configuration except the reference itself (double, exact, plain).
-std::vector<Config> all_configs() { return stress::all_configs(/*with_double=*/true); }
+std::vector<Config> all_configs() {
+    return stress::all_configs(/*with_double=*/true);
+}
 
 /// Renders frame 0 of the case's path (plain, split), or the whole path through one
 /// renderer (cache: the frames after a key frame may come from the cache).
@@ -228,9 +230,12 @@ std::string class_label(const Config& cfg) {
 Bound bound_for(Family f, const Config& cfg) {
     const FamilyBounds b = bounds_for(f);
     switch (stress::bound_class(cfg)) {
-        case stress::BoundClass::bbox3sigma: return cfg.use_double ? b.double_bbox : b.float_bbox;
-        case stress::BoundClass::split: return b.split;
-        case stress::BoundClass::lossless: return cfg.use_double ? b.double_lossless : b.float_lossless;
+        case stress::BoundClass::bbox3sigma:
+            return cfg.use_double ? b.double_bbox : b.float_bbox;
+        case stress::BoundClass::split:
+            return b.split;
+        case stress::BoundClass::lossless:
+            return cfg.use_double ? b.double_lossless : b.float_lossless;
     }
     return {};
 }
@@ -279,8 +284,8 @@ TEST(StressResolution, Huge8192x8192WithAFewGaussians) {
     const auto start = std::chrono::steady_clock::now();
     const FrameStats stats = renderer.render(scene, cam, options, image);
     const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
-    std::cout << "[stress] 8192x8192 float opacity-aware: " << ms << " ms, " << stats.visible << " visible, " << stats.pairs
-              << " pairs" << std::endl;
+    std::cout << "[stress] 8192x8192 float opacity-aware: " << ms << " ms, " << stats.visible << " visible, "
+              << stats.pairs << " pairs" << std::endl;
     ASSERT_EQ(image.width, size);
     ASSERT_EQ(image.rgb.size(), 3u * size * size);
     EXPECT_EQ(count_nonfinite(image), 0u);
@@ -321,12 +326,14 @@ TEST(StressTies, EqualDepthsAreInIndexOrderAndDeterministic) {
     const std::uint64_t seed = test::fresh_seed("stress ties");
     const StressCase c = stress::ties(seed);
     for (const Config& cfg : all_configs()) {
-        const std::vector<Frame> a = render_frames(c, cfg, 1), b = render_frames(c, cfg, 1), two = render_frames(c, cfg, 2);
+        const std::vector<Frame> a = render_frames(c, cfg, 1), b = render_frames(c, cfg, 1),
+                                 two = render_frames(c, cfg, 2);
         ASSERT_EQ(a.size(), two.size());
         for (std::size_t k = 0; k < a.size(); ++k) {
-            EXPECT_EQ(a[k].image.rgb, b[k].image.rgb) << cfg.name() << " frame " << k << ": two runs differ " << seed_note(seed);
-            EXPECT_EQ(a[k].image.rgb, two[k].image.rgb) << cfg.name() << " frame " << k << ": 1 vs 2 threads differ "
-                                                        << seed_note(seed);
+            EXPECT_EQ(a[k].image.rgb, b[k].image.rgb)
+                << cfg.name() << " frame " << k << ": two runs differ " << seed_note(seed);
+            EXPECT_EQ(a[k].image.rgb, two[k].image.rgb)
+                << cfg.name() << " frame " << k << ": 1 vs 2 threads differ " << seed_note(seed);
         }
     }
     // Within every tile, equal keys hold increasing Gaussian indices; float and double agree.

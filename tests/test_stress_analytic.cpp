@@ -25,20 +25,21 @@
 namespace catgs {
 namespace {
 
-using test::stress::Mode;
-using test::stress::StressCase;
 using test::stress::cache_vs_full_levels;
 using test::stress::count_nonfinite;
 using test::stress::kBackground;
+using test::stress::Mode;
 using test::stress::one_gaussian;
 using test::stress::options_for;
 using test::stress::seed_note;
+using test::stress::StressCase;
 namespace stress = test::stress;
 
 // --- What the renderer draws for degenerate input ----------------------------------------
 
 template <typename T>
-ImageF render_one(const Scene& scene, const Camera& camera, Culling culling = Culling::exact, FrameStats* stats = nullptr) {
+ImageF render_one(const Scene& scene, const Camera& camera, Culling culling = Culling::exact,
+                  FrameStats* stats = nullptr) {
     CpuRenderer<T> r(1);
     ImageF out;
     const FrameStats s = r.render(scene, camera, options_for(culling, Mode::plain), out);
@@ -82,7 +83,8 @@ TEST(StressAnalytic, UnderflowingCovariancesRenderAsTheBlur) {
     const double f = cam.intrinsics.fx, z = 5, sigma = 0.9;
     const std::array<float, 3> dc{1.2f, -0.3f, 0.4f};
     for (const auto& scales : {std::array<float, 3>{1, 1e-20f, 1e-20f}, std::array<float, 3>{0, 0, 0}}) {
-        const Scene scene = one_gaussian({0, 0, static_cast<float>(z)}, scales, {1, 0, 0, 0}, static_cast<float>(sigma), dc);
+        const Scene scene =
+            one_gaussian({0, 0, static_cast<float>(z)}, scales, {1, 0, 0, 0}, static_cast<float>(sigma), dc);
         const double vx = std::pow(f * scales[0] / z, 2) + kCovarianceBlur, vy = kCovarianceBlur;
         const ImageF fl = render_one<float>(scene, cam), db = render_one<double>(scene, cam);
         for (int y = 0; y < 48; ++y)
@@ -111,7 +113,8 @@ TEST(StressAnalytic, CameraInsideAHugeGaussianSeesAUniformVeil) {
     for (const auto& [width, fov, s] : {std::tuple{72, 60.0, 10.0}, std::tuple{72, 60.0, 1e3}, std::tuple{72, 5.0, 1e6},
                                         std::tuple{8192, 5.0, 1e6}}) {
         const Camera cam = test::forward_camera(width, 8, fov);
-        const Scene scene = one_gaussian({0, 0, static_cast<float>(z)}, {static_cast<float>(s), static_cast<float>(s), static_cast<float>(s)},
+        const Scene scene = one_gaussian({0, 0, static_cast<float>(z)},
+                                         {static_cast<float>(s), static_cast<float>(s), static_cast<float>(s)},
                                          {1, 0, 0, 0}, static_cast<float>(sigma), dc);
         const double variance = std::pow(cam.intrinsics.fx * s / z, 2) + kCovarianceBlur;
         const ImageF fl = render_one<float>(scene, cam, Culling::opacity_aware), db = render_one<double>(scene, cam);
@@ -144,7 +147,8 @@ TEST(StressNearPlane, CentreBehindAndOnThePlane) {
     auto visible = [&](float z, bool use_double, Culling culling) {
         const Scene scene = one_gaussian({0, 0, z}, {0.01f, 0.01f, 0.01f}, {1, 0, 0, 0}, 0.9f, {1, 1, 1});
         FrameStats s;
-        const ImageF image = use_double ? render_one<double>(scene, cam, culling, &s) : render_one<float>(scene, cam, culling, &s);
+        const ImageF image =
+            use_double ? render_one<double>(scene, cam, culling, &s) : render_one<float>(scene, cam, culling, &s);
         EXPECT_EQ(count_nonfinite(image), 0u);
         return s.visible;
     };
@@ -176,8 +180,10 @@ TEST(StressBugs, NanOpacityDrawsNothingInEveryMode) {
     const Scene scene = one_gaussian({0, 0, 3}, {0.1f, 0.1f, 0.1f}, {1, 0, 0, 0}, stress::kNaN, {2, -1, -1});
     const Scene empty = stress::empty_scene(0);
     for (Culling culling : {Culling::exact, Culling::bbox3sigma, Culling::opacity_aware}) {
-        EXPECT_EQ(render_one<float>(scene, cam, culling).rgb, render_one<float>(empty, cam, culling).rgb) << culling_name(culling);
-        EXPECT_EQ(render_one<double>(scene, cam, culling).rgb, render_one<double>(empty, cam, culling).rgb) << culling_name(culling);
+        EXPECT_EQ(render_one<float>(scene, cam, culling).rgb, render_one<float>(empty, cam, culling).rgb)
+            << culling_name(culling);
+        EXPECT_EQ(render_one<double>(scene, cam, culling).rgb, render_one<double>(empty, cam, culling).rgb)
+            << culling_name(culling);
     }
 }
 
@@ -187,7 +193,8 @@ TEST(StressBugs, FarOffScreenMeanDrawsNothingInFloat) {
     // dy of one sign) makes power = -inf - (-inf) = NaN: exact culling then paints alpha 0.99
     // over the whole image.
     const Camera cam = test::forward_camera(48, 32, 60);
-    const Scene scene = one_gaussian({1e20f, 1e20f, 3}, {0.3f, 0.1f, 0.05f}, {0.9f, 0.3f, -0.2f, 0.25f}, 0.8f, {2, -1, -1});
+    const Scene scene =
+        one_gaussian({1e20f, 1e20f, 3}, {0.3f, 0.1f, 0.05f}, {0.9f, 0.3f, -0.2f, 0.25f}, 0.8f, {2, -1, -1});
     const Scene empty = stress::empty_scene(0);
     for (Culling culling : {Culling::exact, Culling::bbox3sigma, Culling::opacity_aware}) {
         const ImageF image = render_one<float>(scene, cam, culling);
@@ -243,13 +250,15 @@ TEST(StressBugs, FloatProjectsNearlyRankOneCovariances) {
         Projected<float> pf;
         if (!project_gaussian(ref, vd, pd)) continue;
         ++checked;
-        ASSERT_TRUE(project_gaussian(ref, vf, pf)) << "float culls gaussian " << i << " that double projects " << seed_note(seed);
+        ASSERT_TRUE(project_gaussian(ref, vf, pf))
+            << "float culls gaussian " << i << " that double projects " << seed_note(seed);
         // The conic (the inverse covariance) decides alpha; compare it through q at a few
         // offsets of a pixel or more, relative to the offset's length squared over the blur.
         for (auto [dx, dy] : {std::pair{1.0, 0.0}, std::pair{0.0, 1.0}, std::pair{3.0, -2.0}, std::pair{-5.0, 7.0}}) {
             const double qd = conic_form(pd.conic, dx, dy);
             const double qf = conic_form(cast<double>(pf.conic), dx, dy);
-            EXPECT_NEAR(qf, qd, 1e-3 * (dx * dx + dy * dy) / kCovarianceBlur) << "gaussian " << i << " " << seed_note(seed);
+            EXPECT_NEAR(qf, qd, 1e-3 * (dx * dx + dy * dy) / kCovarianceBlur)
+                << "gaussian " << i << " " << seed_note(seed);
         }
     }
     EXPECT_GT(checked, 150);

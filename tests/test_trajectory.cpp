@@ -20,12 +20,12 @@ namespace {
 
 using catgs::Bounds;
 using catgs::Camera;
-using catgs::Intrinsics;
-using catgs::Pose;
 using catgs::cross;
 using catgs::distance;
 using catgs::dot;
+using catgs::Intrinsics;
 using catgs::kPi;
+using catgs::Pose;
 using V3 = catgs::HostVec3;
 
 std::string temp_path(const std::string& name) {
@@ -48,7 +48,9 @@ V3 to_camera(const Pose& p, const V3& x) {
 }
 
 // Camera axis `row` (0 right, 1 down, 2 forward) in world coordinates: a row of R.
-V3 axis(const Pose& p, int row) { return {p.rotation[3 * row], p.rotation[3 * row + 1], p.rotation[3 * row + 2]}; }
+V3 axis(const Pose& p, int row) {
+    return {p.rotation[3 * row], p.rotation[3 * row + 1], p.rotation[3 * row + 2]};
+}
 
 void expect_rigid(const Pose& p, const std::string& what) {
     for (double v : p.rotation) ASSERT_TRUE(std::isfinite(v)) << what;
@@ -125,11 +127,14 @@ TEST(CamerasJson, ReorthonormalisesRoundedRotations) {
 }
 
 TEST(CamerasJson, ErrorsNameFileCameraAndField) {
-    const nlohmann::json good = {{"id", 0},         {"img_name", "a"},
-                                 {"width", 640},    {"height", 480},
+    const nlohmann::json good = {{"id", 0},
+                                 {"img_name", "a"},
+                                 {"width", 640},
+                                 {"height", 480},
                                  {"position", {0, 0, 0}},
                                  {"rotation", {{1, 0, 0}, {0, 1, 0}, {0, 0, 1}}},
-                                 {"fx", 500},       {"fy", 500}};
+                                 {"fx", 500},
+                                 {"fy", 500}};
     // The second camera is the bad one, so the index in the message matters.
     const auto with = [&](const std::string& field, const nlohmann::json& value) {
         nlohmann::json bad = good;
@@ -162,7 +167,8 @@ TEST(CamerasJson, ErrorsNameFileCameraAndField) {
         {with("position", {0, 0}), {"camera 1: field 'position' must be an array of 3 numbers"}},
         {with("position", {0, "x", 0}), {"camera 1: field 'position[1]' must be a number"}},
         {with("rotation", {{1, 0, 0}, {0, 1, 0}}), {"camera 1: field 'rotation' must be a 3x3 array"}},
-        {with("rotation", {{1, 0, 0}, {0, 1, 0}, {0, nullptr, 1}}), {"camera 1: field 'rotation[2][1]' must be a number"}},
+        {with("rotation", {{1, 0, 0}, {0, 1, 0}, {0, nullptr, 1}}),
+         {"camera 1: field 'rotation[2][1]' must be a number"}},
         {with("rotation", {{2, 0, 0}, {0, 2, 0}, {0, 0, 2}}), {"camera 1: field 'rotation' is not orthonormal"}},
         {with("rotation", {{1, 0, 0}, {0, 1, 0}, {0, 0.01, 1}}), {"is not orthonormal"}},
         {with("rotation", {{1, 0, 0}, {0, 1, 0}, {0, 0, -1}}), {"camera 1: field 'rotation' is a reflection"}},
@@ -198,7 +204,8 @@ TEST(TrajectoryFile, WriteThenReadReproducesCameras) {
     for (std::size_t i = 0; i < cameras.size(); ++i) {
         EXPECT_EQ(back[i].timestamp, cameras[i].timestamp);
         for (int k = 0; k < 9; ++k) EXPECT_NEAR(back[i].pose.rotation[k], cameras[i].pose.rotation[k], 1e-12) << i;
-        EXPECT_LT(distance(catgs::camera_centre(back[i].pose), catgs::camera_centre(cameras[i].pose)), 1e-12 * 2e6) << i;
+        EXPECT_LT(distance(catgs::camera_centre(back[i].pose), catgs::camera_centre(cameras[i].pose)), 1e-12 * 2e6)
+            << i;
         EXPECT_EQ(back[i].intrinsics.fx, cameras[i].intrinsics.fx);
         EXPECT_EQ(back[i].intrinsics.fy, cameras[i].intrinsics.fy);
         EXPECT_EQ(back[i].intrinsics.cx, cameras[i].intrinsics.cx);
@@ -287,7 +294,9 @@ std::vector<Camera> fly(const std::string& kind, const World& w, const std::stri
     return catgs::make_trajectory("builtin:" + kind + "?up=" + w.up + keys, w.bounds, kDefaults);
 }
 
-V3 centre_of(const Camera& c) { return catgs::camera_centre(c.pose); }
+V3 centre_of(const Camera& c) {
+    return catgs::camera_centre(c.pose);
+}
 
 // The part of v orthogonal to up.
 V3 horizontal_part(const World& w, const V3& v) {
@@ -302,7 +311,9 @@ V3 horizontal(const World& w, const V3& p) {
     return horizontal_part(w, offset);
 }
 
-double pitch_degrees(const Camera& c, const World& w) { return std::asin(dot(axis(c.pose, 2), w.up_vector)) * 180 / kPi; }
+double pitch_degrees(const Camera& c, const World& w) {
+    return std::asin(dot(axis(c.pose, 2), w.up_vector)) * 180 / kPi;
+}
 
 // Every generated flight: frames, timestamps, intrinsics, rigid poses, +y down in the image.
 void expect_common(const std::vector<Camera>& cameras, const World& w, std::size_t frames, double fps,
@@ -485,7 +496,8 @@ TEST(Flight, DefaultsAndLoadTrajectory) {
 TEST(Flight, SpecErrorsNameKindKeyAndValue) {
     const Bounds city{{-100, -100, 0}, {100, 100, 60}};
     const std::vector<std::pair<std::string, std::vector<std::string>>> cases{
-        {"builtin:spiral", {"builtin:spiral: unknown trajectory kind 'spiral' (available: orbit, survey, flythrough, hover)"}},
+        {"builtin:spiral",
+         {"builtin:spiral: unknown trajectory kind 'spiral' (available: orbit, survey, flythrough, hover)"}},
         {"builtin:survey?fps=0", {"builtin:survey?fps=0: fps must be positive"}},
         {"builtin:orbit?speed=-1", {"speed must be positive"}},
         {"builtin:hover?altitude=0", {"altitude must be positive"}},
@@ -501,7 +513,8 @@ TEST(Flight, SpecErrorsNameKindKeyAndValue) {
         {"builtin:orbit?speed", {"'speed' is missing '='"}},
         // Found by fuzzing (fuzz_trajectory_spec): time and distance overflowed to inf, and the
         // survey converted the NaN position along its pattern to int (undefined behaviour).
-        {"builtin:survey?speed=1e308&fps=1e-308&frames=2", {"the flight is too long: speed * frames / fps is not finite"}},
+        {"builtin:survey?speed=1e308&fps=1e-308&frames=2",
+         {"the flight is too long: speed * frames / fps is not finite"}},
         {"builtin:hover?speed=1e10&fps=1e-300&frames=2", {"the flight is too long"}},
         {"builtin:survey?speed=1e308&fps=2&frames=3", {"the flight is too long"}},  // speed * 2 overflows
     };

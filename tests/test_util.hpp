@@ -42,7 +42,7 @@ inline std::uint64_t fresh_seed(const std::string& what) {
 struct RandomSceneParams {
     std::size_t count = 2000;
     int sh_degree = 3;
-    double extent = 4.0;          ///< Gaussians in [-extent, extent]^2 x [depth_min, depth_max]
+    double extent = 4.0;  ///< Gaussians in [-extent, extent]^2 x [depth_min, depth_max]
     double depth_min = 3.0, depth_max = 12.0;
     double log_scale_min = -4.0, log_scale_max = -1.0;
     double sh_rest_magnitude = 0.2;

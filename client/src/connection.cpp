@@ -56,7 +56,8 @@ void add_connection_flags(CLI::App& app, ConnectionFlags& flags) {
                    "per run)");
     app.add_flag("--tls", conn.tls, "connect with TLS (system roots unless --tls-ca)");
     app.add_option("--tls-ca", conn.tls_ca, "PEM CA bundle to verify the server (implies --tls)");
-    app.add_option("--tls-cert", conn.tls_cert, "PEM client certificate chain for mutual TLS (with --tls-key; implies --tls)");
+    app.add_option("--tls-cert", conn.tls_cert,
+                   "PEM client certificate chain for mutual TLS (with --tls-key; implies --tls)");
     app.add_option("--tls-key", conn.tls_key, "PEM private key of --tls-cert");
     app.add_option("--retries", flags.retries,
                    "stream and load: on UNAVAILABLE (server down, restarting or draining) reconnect up to this many "
@@ -77,8 +78,9 @@ Connection make_connection(const ConnectionFlags& flags) {
     Connection conn = flags.connection;
     if (conn.session_id.empty()) {
         char id[17];
-        std::snprintf(id, sizeof id, "%016llx", static_cast<unsigned long long>(std::random_device{}()) << 32 ^
-                                                    static_cast<unsigned long long>(std::random_device{}()));
+        std::snprintf(id, sizeof id, "%016llx",
+                      static_cast<unsigned long long>(std::random_device{}()) << 32 ^
+                          static_cast<unsigned long long>(std::random_device{}()));
         conn.session_id = id;
     } else if (!valid_session_id(conn.session_id)) {
         throw Error("--session-id: expected 1.." + std::to_string(kMaxSessionIdLength) +

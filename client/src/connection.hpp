@@ -18,7 +18,7 @@ inline constexpr auto kConnectTimeout = std::chrono::seconds(10);
 struct Connection {
     std::string server = "localhost:50051";
     std::string token_file;
-    std::string tls_ca;  ///< PEM CA: use TLS
+    std::string tls_ca;             ///< PEM CA: use TLS
     std::string tls_cert, tls_key;  ///< PEM client certificate and key (mTLS)
     bool tls = false;
     RetryPolicy retry;

@@ -8,25 +8,32 @@ namespace catgs::client {
 
 int exit_code(const grpc::Status& s) {
     switch (s.error_code()) {
-    case grpc::StatusCode::OK: return kExitOk;
-    case grpc::StatusCode::UNAVAILABLE:
-    case grpc::StatusCode::DEADLINE_EXCEEDED: return kExitUnavailable;
-    case grpc::StatusCode::RESOURCE_EXHAUSTED: return kExitLimit;
-    case grpc::StatusCode::UNAUTHENTICATED:
-    case grpc::StatusCode::PERMISSION_DENIED: return kExitUnauthenticated;
-    case grpc::StatusCode::INVALID_ARGUMENT:
-    case grpc::StatusCode::NOT_FOUND:
-    case grpc::StatusCode::FAILED_PRECONDITION:
-    case grpc::StatusCode::ALREADY_EXISTS: return kExitRejected;
-    default: return kExitFailure;
+        case grpc::StatusCode::OK:
+            return kExitOk;
+        case grpc::StatusCode::UNAVAILABLE:
+        case grpc::StatusCode::DEADLINE_EXCEEDED:
+            return kExitUnavailable;
+        case grpc::StatusCode::RESOURCE_EXHAUSTED:
+            return kExitLimit;
+        case grpc::StatusCode::UNAUTHENTICATED:
+        case grpc::StatusCode::PERMISSION_DENIED:
+            return kExitUnauthenticated;
+        case grpc::StatusCode::INVALID_ARGUMENT:
+        case grpc::StatusCode::NOT_FOUND:
+        case grpc::StatusCode::FAILED_PRECONDITION:
+        case grpc::StatusCode::ALREADY_EXISTS:
+            return kExitRejected;
+        default:
+            return kExitFailure;
     }
 }
 
 const char* code_name(grpc::StatusCode code) {
-    static const char* names[] = {"OK", "CANCELLED", "UNKNOWN", "INVALID_ARGUMENT", "DEADLINE_EXCEEDED", "NOT_FOUND",
-                                  "ALREADY_EXISTS", "PERMISSION_DENIED", "RESOURCE_EXHAUSTED", "FAILED_PRECONDITION",
-                                  "ABORTED", "OUT_OF_RANGE", "UNIMPLEMENTED", "INTERNAL", "UNAVAILABLE", "DATA_LOSS",
-                                  "UNAUTHENTICATED"};
+    static const char* names[] = {
+        "OK",        "CANCELLED",      "UNKNOWN",           "INVALID_ARGUMENT",   "DEADLINE_EXCEEDED",
+        "NOT_FOUND", "ALREADY_EXISTS", "PERMISSION_DENIED", "RESOURCE_EXHAUSTED", "FAILED_PRECONDITION",
+        "ABORTED",   "OUT_OF_RANGE",   "UNIMPLEMENTED",     "INTERNAL",           "UNAVAILABLE",
+        "DATA_LOSS", "UNAUTHENTICATED"};
     const int i = static_cast<int>(code);
     return i >= 0 && i < 17 ? names[i] : "?";
 }

@@ -12,6 +12,8 @@ double LatencyRecorder::percentile(double p) const {
     return samples_[std::min(samples_.size() - 1, rank == 0 ? 0 : rank - 1)];
 }
 
-double LatencyRecorder::max() const { return samples_.empty() ? 0 : *std::max_element(samples_.begin(), samples_.end()); }
+double LatencyRecorder::max() const {
+    return samples_.empty() ? 0 : *std::max_element(samples_.begin(), samples_.end());
+}
 
 }  // namespace catgs::client

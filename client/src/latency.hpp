@@ -9,7 +9,9 @@ namespace catgs::client {
 class LatencyRecorder {
 public:
     void add(double ms) { samples_.push_back(ms); }
-    void merge(const LatencyRecorder& other) { samples_.insert(samples_.end(), other.samples_.begin(), other.samples_.end()); }
+    void merge(const LatencyRecorder& other) {
+        samples_.insert(samples_.end(), other.samples_.begin(), other.samples_.end());
+    }
     std::size_t count() const { return samples_.size(); }
     /// p in [0, 1], nearest-rank; 0 when empty.
     double percentile(double p) const;

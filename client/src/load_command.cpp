@@ -47,8 +47,12 @@ std::vector<StreamResult> run_streams(const Connection& conn, const StreamPlan& 
             RetryPolicy retry = conn.retry;
             if (retry.seed) retry.seed += static_cast<std::uint64_t>(i);
             results[static_cast<std::size_t>(i)] = run_stream_with_retries(
-                conn.channel(true), mine, [&](const v1::Frame& frame, double) { if (!frame.has_error()) ++frames_total; },
-                stop_requested(), retry, [i](const std::string& line) { std::fprintf(stderr, "[stream %d] %s\n", i, line.c_str()); });
+                conn.channel(true), mine,
+                [&](const v1::Frame& frame, double) {
+                    if (!frame.has_error()) ++frames_total;
+                },
+                stop_requested(), retry,
+                [i](const std::string& line) { std::fprintf(stderr, "[stream %d] %s\n", i, line.c_str()); });
         });
     }
     std::atomic<bool> done{false};
@@ -143,7 +147,8 @@ void print_report(const SessionFlags& f, int streams, double elapsed, const Load
 }  // namespace
 
 CLI::App* add_load_command(CLI::App& app, LoadArgs& args) {
-    CLI::App* load = app.add_subcommand("load", "N concurrent open-loop streams; latency percentiles and a JSON report");
+    CLI::App* load =
+        app.add_subcommand("load", "N concurrent open-loop streams; latency percentiles and a JSON report");
     add_session_flags(load, args.session);
     load->add_option("--streams", args.streams, "concurrent streams")->capture_default_str();
     load->add_option("--duration", args.duration, "seconds")->capture_default_str();
@@ -157,7 +162,8 @@ int run_load_command(const Connection& conn, const LoadArgs& args) {
     if (!(args.duration > 0 && args.duration <= 3600)) throw Error("--duration: expected (0, 3600] seconds");
     if (f.rate <= 0) throw Error("--rate: load runs open loop, give a positive pose rate");
     Bounds bounds;
-    if (grpc::Status s = scene_bounds(conn, f.scene, &bounds); !s.ok()) return report_failure("GetScene '" + f.scene + "'", s);
+    if (grpc::Status s = scene_bounds(conn, f.scene, &bounds); !s.ok())
+        return report_failure("GetScene '" + f.scene + "'", s);
     StreamPlan plan = make_plan(conn, f, bounds);
     plan.poses = static_cast<std::size_t>(std::ceil(args.duration * f.rate));
     plan.max_duration = std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(args.duration));

@@ -53,7 +53,8 @@ int run_scenes_command(const Connection& conn, const ScenesArgs& args) {
     conn.add_metadata(context, conn.authorization());
     context.set_wait_for_ready(true);
     // Loading a large scene takes a while; the rest is immediate.
-    context.set_deadline(std::chrono::system_clock::now() + (action == "load" ? std::chrono::seconds(600) : kConnectTimeout));
+    context.set_deadline(std::chrono::system_clock::now() +
+                         (action == "load" ? std::chrono::seconds(600) : kConnectTimeout));
     grpc::Status status;
     nlohmann::json out;
     if (action == "list") {
@@ -61,8 +62,10 @@ int run_scenes_command(const Connection& conn, const ScenesArgs& args) {
         status = stub->ListScenes(&context, {}, &response);
         out = nlohmann::json::array();
         for (const auto& s : response.scenes()) {
-            if (json) out.push_back(scene_json(s));
-            else print_scene(s);
+            if (json)
+                out.push_back(scene_json(s));
+            else
+                print_scene(s);
         }
     } else if (action == "get" || action == "load" || action == "unload") {
         if (arg.empty()) throw Error("scenes " + action + ": missing " + (action == "load" ? "SOURCE" : "ID"));
@@ -87,8 +90,11 @@ int run_scenes_command(const Connection& conn, const ScenesArgs& args) {
             v1::UnloadSceneResponse response;
             status = stub->UnloadScene(&context, request, &response);
             if (status.ok()) {
-                if (json) out = {{"scene", scene_json(response.scene())}, {"freed", response.freed()}};
-                else std::printf("%s: %s\n", arg.c_str(), response.freed() ? "freed" : "unloading (freed when its sessions close)");
+                if (json)
+                    out = {{"scene", scene_json(response.scene())}, {"freed", response.freed()}};
+                else
+                    std::printf("%s: %s\n", arg.c_str(),
+                                response.freed() ? "freed" : "unloading (freed when its sessions close)");
             }
         }
     } else {

@@ -22,10 +22,12 @@ void add_session_flags(CLI::App* app, SessionFlags& f) {
     app->add_option("--fov", f.fov, "horizontal field of view, degrees")->capture_default_str();
     app->add_option("--encoding", f.encoding, "jpeg, png or raw")->capture_default_str();
     app->add_option("--quality", f.quality, "JPEG quality 1..100")->capture_default_str();
-    app->add_option("--cache", f.cache, "server, off or speculative (the inter-frame cache; the server's default is speculative)")
+    app->add_option("--cache", f.cache,
+                    "server, off or speculative (the inter-frame cache; the server's default is speculative)")
         ->capture_default_str();
     app->add_option("--window", f.window, "adaptive or a fixed W 1..16")->capture_default_str();
-    app->add_option("--split", f.split, "server, off, auto or k (the server's default is k = 8192)")->capture_default_str();
+    app->add_option("--split", f.split, "server, off, auto or k (the server's default is k = 8192)")
+        ->capture_default_str();
     app->add_option("--resort", f.resort,
                     "server, on or off; with the cache: on re-sorts cached frames by the current depth (every frame "
                     "exact); off keeps the key frame's order (the paper's cache and the server's default: faster, "
@@ -37,11 +39,13 @@ void add_session_flags(CLI::App* app, SessionFlags& f) {
         ->capture_default_str();
     app->add_option("--max-unacked", f.max_unacked, "frames the server may send ahead of our acknowledgement (1..2)")
         ->capture_default_str();
-    app->add_option("--flight-plan", f.flight_plan, "future poses sent with each request (0..16)")->capture_default_str();
+    app->add_option("--flight-plan", f.flight_plan, "future poses sent with each request (0..16)")
+        ->capture_default_str();
     app->add_flag("--no-velocity", f.no_velocity, "do not report the path's velocity");
     app->add_option("--rate", f.rate, "poses per second (0: lock step, next pose when a frame arrives)")
         ->capture_default_str();
-    app->add_flag("--lock-step", f.lock_step, "wait for each frame before sending the next pose, at most --rate per second");
+    app->add_flag("--lock-step", f.lock_step,
+                  "wait for each frame before sending the next pose, at most --rate per second");
 }
 
 v1::SessionConfig make_config(const SessionFlags& f) {
@@ -52,15 +56,22 @@ v1::SessionConfig make_config(const SessionFlags& f) {
     c.set_height(static_cast<std::uint32_t>(f.height));
     c.set_horizontal_fov_degrees(f.fov);
     auto* e = c.mutable_encoding();
-    if (f.encoding == "jpeg") e->set_encoding(v1::ENCODING_JPEG);
-    else if (f.encoding == "png") e->set_encoding(v1::ENCODING_PNG);
-    else if (f.encoding == "raw") e->set_encoding(v1::ENCODING_RAW_RGB8);
-    else throw Error("--encoding '" + f.encoding + "': expected jpeg, png or raw");
+    if (f.encoding == "jpeg")
+        e->set_encoding(v1::ENCODING_JPEG);
+    else if (f.encoding == "png")
+        e->set_encoding(v1::ENCODING_PNG);
+    else if (f.encoding == "raw")
+        e->set_encoding(v1::ENCODING_RAW_RGB8);
+    else
+        throw Error("--encoding '" + f.encoding + "': expected jpeg, png or raw");
     e->set_jpeg_quality(f.quality);
     auto* p = c.mutable_pipeline();
-    if (f.cache == "off") p->set_cache(v1::CACHE_MODE_OFF);
-    else if (f.cache == "speculative") p->set_cache(v1::CACHE_MODE_SPECULATIVE);
-    else if (f.cache != "server") throw Error("--cache '" + f.cache + "': expected server, speculative or off");
+    if (f.cache == "off")
+        p->set_cache(v1::CACHE_MODE_OFF);
+    else if (f.cache == "speculative")
+        p->set_cache(v1::CACHE_MODE_SPECULATIVE);
+    else if (f.cache != "server")
+        throw Error("--cache '" + f.cache + "': expected server, speculative or off");
     if (f.window != "adaptive") {
         try {
             p->set_fixed_window(static_cast<std::uint32_t>(std::stoul(f.window)));
@@ -68,9 +79,12 @@ v1::SessionConfig make_config(const SessionFlags& f) {
             throw Error("--window '" + f.window + "': expected adaptive or 1..16");
         }
     }
-    if (f.resort == "off") p->set_reuse_depth_order(true);
-    else if (f.resort == "on") p->set_reuse_depth_order(false);
-    else if (f.resort != "server") throw Error("--resort '" + f.resort + "': expected server, on or off");
+    if (f.resort == "off")
+        p->set_reuse_depth_order(true);
+    else if (f.resort == "on")
+        p->set_reuse_depth_order(false);
+    else if (f.resort != "server")
+        throw Error("--resort '" + f.resort + "': expected server, on or off");
     if (f.reuse_order_max_deg != "server") {
         const auto degrees = parse_degrees(f.reuse_order_max_deg);
         if (!degrees)

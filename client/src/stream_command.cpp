@@ -35,9 +35,11 @@ int run_stream_command(const Connection& conn, const StreamArgs& args) {
     const std::string& out = args.out;
     const long max_frames = args.max_frames;
     Bounds bounds;
-    if (grpc::Status s = scene_bounds(conn, f.scene, &bounds); !s.ok()) return report_failure("GetScene '" + f.scene + "'", s);
+    if (grpc::Status s = scene_bounds(conn, f.scene, &bounds); !s.ok())
+        return report_failure("GetScene '" + f.scene + "'", s);
     StreamPlan plan = make_plan(conn, f, bounds);
-    if (max_frames > 0 && plan.poses > static_cast<std::size_t>(max_frames)) plan.poses = static_cast<std::size_t>(max_frames);
+    if (max_frames > 0 && plan.poses > static_cast<std::size_t>(max_frames))
+        plan.poses = static_cast<std::size_t>(max_frames);
     if (!out.empty()) {
         std::error_code ec;
         std::filesystem::create_directories(out, ec);
@@ -45,7 +47,9 @@ int run_stream_command(const Connection& conn, const StreamArgs& args) {
     }
     const std::string pace = f.rate > 0 ? std::to_string(static_cast<int>(std::lround(f.rate))) + " Hz" : "";
     std::printf("streaming %zu poses of %s at %s to %s (%dx%d %s)\n", plan.poses, f.trajectory.c_str(),
-                f.rate <= 0 ? "lock step" : f.lock_step ? ("lock step, at most " + pace).c_str() : pace.c_str(),
+                f.rate <= 0   ? "lock step"
+                : f.lock_step ? ("lock step, at most " + pace).c_str()
+                              : pace.c_str(),
                 conn.server.c_str(), f.width, f.height, f.encoding.c_str());
     std::fflush(stdout);
     // Per-second progress, from the reading thread.
@@ -82,21 +86,22 @@ int run_stream_command(const Connection& conn, const StreamArgs& args) {
         const Clock::time_point now = Clock::now();
         if (now - window_start >= std::chrono::seconds(1)) report(now);
     };
-    StreamResult r = run_stream_with_retries(
-        conn.channel(), plan, on_frame, stop_requested(), conn.retry, [](const std::string& line) {
-            std::fprintf(stderr, "%s\n", line.c_str());
-            std::fflush(stderr);
-        });
+    StreamResult r = run_stream_with_retries(conn.channel(), plan, on_frame, stop_requested(), conn.retry,
+                                             [](const std::string& line) {
+                                                 std::fprintf(stderr, "%s\n", line.c_str());
+                                                 std::fflush(stderr);
+                                             });
     if (window_frames > 0) report(Clock::now());
     const double secs = std::chrono::duration<double>(Clock::now() - start).count();
-    std::printf("summary: %llu poses sent, %llu frames (%.1f fps, %.2f MB), %llu poses coalesced by the server, %llu "
-                "frame errors, %d reconnects; latency p50 %.1f p90 %.1f p99 %.1f max %.1f ms; first frame after %.1f ms; "
-                "status %s%s%s\n",
-                static_cast<unsigned long long>(r.poses_sent), static_cast<unsigned long long>(r.frames),
-                secs > 0 ? r.frames / secs : 0.0, r.bytes / 1e6, static_cast<unsigned long long>(r.server_poses_coalesced),
-                static_cast<unsigned long long>(r.frame_errors), r.reconnects, r.latency.percentile(0.5),
-                r.latency.percentile(0.9), r.latency.percentile(0.99), r.latency.max(), r.time_to_first_frame_ms,
-                code_name(r.status.error_code()), r.status.ok() ? "" : ": ", r.status.error_message().c_str());
+    std::printf(
+        "summary: %llu poses sent, %llu frames (%.1f fps, %.2f MB), %llu poses coalesced by the server, %llu "
+        "frame errors, %d reconnects; latency p50 %.1f p90 %.1f p99 %.1f max %.1f ms; first frame after %.1f ms; "
+        "status %s%s%s\n",
+        static_cast<unsigned long long>(r.poses_sent), static_cast<unsigned long long>(r.frames),
+        secs > 0 ? r.frames / secs : 0.0, r.bytes / 1e6, static_cast<unsigned long long>(r.server_poses_coalesced),
+        static_cast<unsigned long long>(r.frame_errors), r.reconnects, r.latency.percentile(0.5),
+        r.latency.percentile(0.9), r.latency.percentile(0.99), r.latency.max(), r.time_to_first_frame_ms,
+        code_name(r.status.error_code()), r.status.ok() ? "" : ": ", r.status.error_message().c_str());
     if (!r.status.ok()) return exit_code(r.status);
     return errors > 0 ? kExitFailure : kExitOk;
 }

@@ -12,7 +12,9 @@ namespace catgs::client {
 
 namespace {
 
-double ms_since(Clock::time_point a, Clock::time_point b) { return std::chrono::duration<double, std::milli>(b - a).count(); }
+double ms_since(Clock::time_point a, Clock::time_point b) {
+    return std::chrono::duration<double, std::milli>(b - a).count();
+}
 
 std::int64_t micros(Clock::time_point t, Clock::time_point origin) {
     return std::chrono::duration_cast<std::chrono::microseconds>(t - origin).count();

@@ -36,16 +36,16 @@ inline bool valid_session_id(const std::string& id) {
 
 struct StreamPlan {
     v1::SessionConfig config;
-    std::vector<Camera> path;     ///< poses, in order; repeated cyclically up to `poses`
-    std::size_t poses = 0;        ///< how many to send
-    double rate_hz = 30;          ///< pose rate; 0 = lock step (next pose when a frame arrives)
-    bool lock_step = false;       ///< wait for each frame before the next pose (with rate_hz: at most that rate)
-    int flight_plan = 0;          ///< future poses sent with each request
-    bool velocity = true;         ///< send the path's velocity
-    std::string authorization;    ///< "Bearer ..." or empty
-    std::string session_id;       ///< sent as kSessionHeader, or empty
+    std::vector<Camera> path;   ///< poses, in order; repeated cyclically up to `poses`
+    std::size_t poses = 0;      ///< how many to send
+    double rate_hz = 30;        ///< pose rate; 0 = lock step (next pose when a frame arrives)
+    bool lock_step = false;     ///< wait for each frame before the next pose (with rate_hz: at most that rate)
+    int flight_plan = 0;        ///< future poses sent with each request
+    bool velocity = true;       ///< send the path's velocity
+    std::string authorization;  ///< "Bearer ..." or empty
+    std::string session_id;     ///< sent as kSessionHeader, or empty
     Clock::duration max_duration = std::chrono::hours(24);
-    std::size_t first = 0;        ///< index of the first pose to send (a resumed stream)
+    std::size_t first = 0;  ///< index of the first pose to send (a resumed stream)
 };
 
 /// Reconnection after UNAVAILABLE (server restarting, draining or unreachable): jittered
@@ -67,8 +67,8 @@ struct StreamResult {
     std::uint64_t server_poses_coalesced = 0, server_frames_coalesced = 0;
     double time_to_first_frame_ms = -1;
     LatencyRecorder latency;
-    std::size_t next_index = 0;   ///< where a resumed stream starts: the first pose without a frame
-    int reconnects = 0;           ///< retries after UNAVAILABLE (run_stream_with_retries)
+    std::size_t next_index = 0;  ///< where a resumed stream starts: the first pose without a frame
+    int reconnects = 0;          ///< retries after UNAVAILABLE (run_stream_with_retries)
 };
 
 /// Called for each frame received (on the reading thread) with its latency in ms.

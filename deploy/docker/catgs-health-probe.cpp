@@ -39,7 +39,7 @@ const char* const kUsage =
 // HealthCheckRequest { string service = 1; }
 std::string encode_request(const std::string& service) {
     std::string out;
-    if (service.empty()) return out;  // proto3: an empty string is not written
+    if (service.empty()) return out;         // proto3: an empty string is not written
     out.push_back(static_cast<char>(0x0a));  // field 1, wire type 2 (length-delimited)
     std::uint64_t n = service.size();
     while (n >= 0x80) {
@@ -74,13 +74,18 @@ long decode_status(const std::string& in) {
                 if (!read_varint(in, &pos, &value)) return -1;
                 if (field == 1) status = static_cast<long>(value);
                 break;
-            case 1: pos += 8; break;
+            case 1:
+                pos += 8;
+                break;
             case 2:
                 if (!read_varint(in, &pos, &value) || value > in.size() - pos) return -1;
                 pos += value;
                 break;
-            case 5: pos += 4; break;
-            default: return -1;
+            case 5:
+                pos += 4;
+                break;
+            default:
+                return -1;
         }
         if (pos > in.size()) return -1;
     }
@@ -89,11 +94,16 @@ long decode_status(const std::string& in) {
 
 const char* status_name(long status) {
     switch (status) {
-        case 0: return "UNKNOWN";
-        case 1: return "SERVING";
-        case 2: return "NOT_SERVING";
-        case 3: return "SERVICE_UNKNOWN";
-        default: return "an unknown status";
+        case 0:
+            return "UNKNOWN";
+        case 1:
+            return "SERVING";
+        case 2:
+            return "NOT_SERVING";
+        case 3:
+            return "SERVICE_UNKNOWN";
+        default:
+            return "an unknown status";
     }
 }
 

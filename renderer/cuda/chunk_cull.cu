@@ -25,8 +25,8 @@ std::uint32_t chunk_cull(const ChunkCullArgs<T>& a, cudaStream_t s) {
     b.flags.reserve(a.count, s);
     b.selected.reserve(a.count, s);
     b.selected_count.reserve(1, s);
-    chunk_cull_kernel<T><<<blocks_for(a.count, kThreads), kThreads, 0, s>>>(a.chunks, a.count, a.views, a.window, a.guard,
-                                                                          a.guard_translation, b.flags.data());
+    chunk_cull_kernel<T><<<blocks_for(a.count, kThreads), kThreads, 0, s>>>(
+        a.chunks, a.count, a.views, a.window, a.guard, a.guard_translation, b.flags.data());
     CATGS_CUDA_CHECK_LAUNCH("chunk_cull_kernel");
     std::size_t temp_bytes = 0;
     CATGS_CUDA_CHECK(cub::DeviceSelect::Flagged(nullptr, temp_bytes, a.all_chunks, b.flags.data(), b.selected.data(),

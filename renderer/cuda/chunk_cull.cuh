@@ -18,11 +18,11 @@ struct ChunkCullArgs {
     const Chunk* chunks;
     const std::uint32_t* all_chunks;  // 0..count-1: what the compaction picks from
     std::uint32_t count;
-    const View<T>* views;             // the window's poses
+    const View<T>* views;  // the window's poses
     int window;
-    T guard, guard_translation;       // the envelope (cache.hpp); 0 without speculation
-    ChunkBuffers* buffers;            // flags, the selected chunks and their count
-    std::uint32_t* host_selected;     // pinned: the count on its way to the host
+    T guard, guard_translation;    // the envelope (cache.hpp); 0 without speculation
+    ChunkBuffers* buffers;         // flags, the selected chunks and their count
+    std::uint32_t* host_selected;  // pinned: the count on its way to the host
 };
 
 /// Flags and compacts the visible chunks into buffers->selected; returns how many there are.

@@ -13,7 +13,7 @@ namespace catgs::cuda {
 
 struct CopyOutArgs {
     std::size_t pixels;
-    const std::uint8_t* rgb8;   // device; null: not asked for
+    const std::uint8_t* rgb8;  // device; null: not asked for
     const float* rgb_float;
     PinnedArray<std::uint8_t>* host_rgb8;
     PinnedArray<float>* host_float;

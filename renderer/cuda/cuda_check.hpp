@@ -20,18 +20,18 @@ namespace catgs::cuda {
 
 }  // namespace catgs::cuda
 
-#define CATGS_CUDA_CHECK(call)                                                                      \
-    do {                                                                                            \
-        const cudaError_t catgs_status_ = (call);                                                   \
+#define CATGS_CUDA_CHECK(call)                                                                                       \
+    do {                                                                                                             \
+        const cudaError_t catgs_status_ = (call);                                                                    \
         if (catgs_status_ != cudaSuccess) ::catgs::cuda::throw_cuda_error(catgs_status_, #call, __FILE__, __LINE__); \
     } while (0)
 
 /// After a kernel launch: reports launch-configuration errors at the launching line, naming
 /// the kernel.
-#define CATGS_CUDA_CHECK_LAUNCH(name)                                                               \
-    do {                                                                                            \
-        const cudaError_t catgs_status_ = cudaPeekAtLastError();                                    \
-        if (catgs_status_ != cudaSuccess)                                                           \
-            ::catgs::cuda::throw_cuda_error(catgs_status_, (std::string("the launch of ") + (name)).c_str(), \
-                                            __FILE__, __LINE__);                                    \
+#define CATGS_CUDA_CHECK_LAUNCH(name)                                                                                  \
+    do {                                                                                                               \
+        const cudaError_t catgs_status_ = cudaPeekAtLastError();                                                       \
+        if (catgs_status_ != cudaSuccess)                                                                              \
+            ::catgs::cuda::throw_cuda_error(catgs_status_, (std::string("the launch of ") + (name)).c_str(), __FILE__, \
+                                            __LINE__);                                                                 \
     } while (0)

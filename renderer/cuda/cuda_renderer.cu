@@ -155,13 +155,20 @@ FrameStats CudaRenderer<T>::render(const Camera& camera, const RenderOptions& op
     if (!f.plan.key) m.add_cached_list_times();
     m.copy_out(f, rgb8, rgb_float);
     if (f.plan.key) m.key_rendered(f, m.host.counters.data()->frame);
-    m.last = LastFrame{true, f.total, f.tiles, m.max_extra_tasks(f, f.total), f.shared_list, f.split_used,
-                       f.bands.size() > 1, m.host.counters.data()->tasks};
+    m.last = LastFrame{true,
+                       f.total,
+                       f.tiles,
+                       m.max_extra_tasks(f, f.total),
+                       f.shared_list,
+                       f.split_used,
+                       f.bands.size() > 1,
+                       m.host.counters.data()->tasks};
     return m.frame_stats(f);
 }
 
 template <typename T>
-Frame<T> CudaRenderer<T>::Impl::plan_frame(const Camera& camera, const RenderOptions& options, const FrameHints* hints) {
+Frame<T> CudaRenderer<T>::Impl::plan_frame(const Camera& camera, const RenderOptions& options,
+                                           const FrameHints* hints) {
     Frame<T> f;
     f.options = &options;
     const CatgsOptions& catgs = options.catgs;
@@ -209,8 +216,8 @@ void CudaRenderer<T>::Impl::begin_frame(const Frame<T>& f, bool rgb8, bool rgb_f
 
     CATGS_CUDA_CHECK(cudaMemsetAsync(frame_counters(), 0, sizeof(FrameCounters), s));
     const unsigned int far_bits = 0x7f800000u;  // +inf: the atomicMin start of the nearest depth
-    CATGS_CUDA_CHECK(cudaMemcpyAsync(&frame_counters()->min_depth_bits, &far_bits, sizeof(far_bits),
-                                     cudaMemcpyHostToDevice, s));
+    CATGS_CUDA_CHECK(
+        cudaMemcpyAsync(&frame_counters()->min_depth_bits, &far_bits, sizeof(far_bits), cudaMemcpyHostToDevice, s));
     events.clear();
     events.record(Event::start, s);
 }
@@ -230,10 +237,10 @@ void CudaRenderer<T>::Impl::chunk_cull(Frame<T>& f) {
     std::uint32_t live_chunks = chunk_count;
     const std::uint32_t* selected = sc.all_chunks();
     if (options.chunk_culling && options.culling != Culling::exact && sc.partitioned() && chunk_count > 0) {
-        live_chunks = cuda::chunk_cull(ChunkCullArgs<T>{sc.chunks(), sc.all_chunks(), chunk_count,
-                                                        buffers.window.views.data(), w, f.guard, f.guard_translation,
-                                                        &buffers.chunks, host.selected.data()},
-                                       stream);
+        live_chunks =
+            cuda::chunk_cull(ChunkCullArgs<T>{sc.chunks(), sc.all_chunks(), chunk_count, buffers.window.views.data(), w,
+                                              f.guard, f.guard_translation, &buffers.chunks, host.selected.data()},
+                             stream);
         selected = buffers.chunks.selected.data();
     }
     key_space = ChunkSpace{sc.chunks(), selected, static_cast<std::uint64_t>(live_chunks) * kChunkGaussians};
@@ -342,8 +349,8 @@ void CudaRenderer<T>::Impl::add_list_times(Event pass_start) {
 template <typename T>
 void CudaRenderer<T>::Impl::reproject(Frame<T>& f) {
     GaussianBuffers<T>& g = buffers.gaussians;
-    cuda::reproject(ReprojectArgs<T>{f.scene, key_space, f.view, g.touched.data(), g.projected.data(), frame_counters()},
-                    stream);
+    cuda::reproject(
+        ReprojectArgs<T>{f.scene, key_space, f.view, g.touched.data(), g.projected.data(), frame_counters()}, stream);
     events.record(Event::preprocess, stream);
 }
 
@@ -354,10 +361,10 @@ void CudaRenderer<T>::Impl::rekey(const Frame<T>& f) {
     PairBuffers& p = buffers.pairs;
     if (f.total > 0) {
         p.current = 0;
-        cuda::rekey(RekeyArgs<T>{f.total, p.emitted_keys.data(), p.emitted_values.data(),
-                                 buffers.gaussians.projected.data(), f.view, f.options->culling, p.keys[0].data(),
-                                 p.values[0].data()},
-                    stream);
+        cuda::rekey(
+            RekeyArgs<T>{f.total, p.emitted_keys.data(), p.emitted_values.data(), buffers.gaussians.projected.data(),
+                         f.view, f.options->culling, p.keys[0].data(), p.values[0].data()},
+            stream);
     }
     events.record(Event::keys, stream);
 }
@@ -384,9 +391,9 @@ bool CudaRenderer<T>::Impl::ranges_and_split(const Frame<T>& f, std::uint64_t pa
     const cudaStream_t s = stream;
     const CatgsOptions& catgs = f.options->catgs;
     TileBuffers& t = buffers.tiles;
-    cuda::ranges(RangesArgs{pairs, buffers.pairs.keys[buffers.pairs.current].data(), static_cast<std::uint32_t>(f.tiles),
-                            f.shared_list, catgs.split_auto ? 0 : catgs.split_k, t.range_begin.data(),
-                            t.range_end.data(), task_counters()},
+    cuda::ranges(RangesArgs{pairs, buffers.pairs.keys[buffers.pairs.current].data(),
+                            static_cast<std::uint32_t>(f.tiles), f.shared_list, catgs.split_auto ? 0 : catgs.split_k,
+                            t.range_begin.data(), t.range_end.data(), task_counters()},
                  s);
     events.record(Event::ranges, s);
     // Exact culling shares one list, which this task layout does not split.
@@ -395,10 +402,10 @@ bool CudaRenderer<T>::Impl::ranges_and_split(const Frame<T>& f, std::uint64_t pa
         const std::uint64_t max_extra = pairs / f.k_min + 1;
         t.labels.reserve(max_extra, s);
         buffers.pixels.partials.reserve((max_extra + std::min<std::uint64_t>(f.tiles, max_extra)) * kTilePixels, s);
-        cuda::split(SplitArgs{static_cast<std::uint32_t>(f.tiles), t.range_begin.data(), t.range_end.data(), max_extra,
-                              catgs.split_auto, task_counters(), t.split_slot.data(), t.labels.data(),
-                              t.split_tiles.data()},
-                    s);
+        cuda::split(
+            SplitArgs{static_cast<std::uint32_t>(f.tiles), t.range_begin.data(), t.range_end.data(), max_extra,
+                      catgs.split_auto, task_counters(), t.split_slot.data(), t.labels.data(), t.split_tiles.data()},
+            s);
     }
     events.record(Event::split, s);
     return split;
@@ -413,15 +420,15 @@ void CudaRenderer<T>::Impl::rasterize(const Frame<T>& f, TileRows rows, std::uin
     const std::uint32_t band_tiles = static_cast<std::uint32_t>(rows.end - rows.begin) * f.view.tiles_x;
     const std::uint64_t max_extra = max_extra_tasks(f, pairs);
     // Not in exact mode, the ground truth: there every Gaussian meets every pixel's own test.
-    const TaskGrid grid{first_tile, band_tiles, f.split_used, f.shared_list, pairs,
-                        f.options->culling != Culling::exact};
+    const TaskGrid grid{first_tile,    band_tiles, f.split_used,
+                        f.shared_list, pairs,      f.options->culling != Culling::exact};
     const TileBuffers& t = buffers.tiles;
-    cuda::rasterize(RasterizeArgs<T>{grid, band_tiles + max_extra, t.range_begin.data(), t.range_end.data(),
-                                     t.split_slot.data(), t.labels.data(), task_counters(),
-                                     buffers.pairs.values[buffers.pairs.current].data(),
-                                     buffers.gaussians.projected.data(), f.view, f.background, f.tail,
-                                     buffers.pixels.partials.data(), rgb8, rgb_float},
-                    stream);
+    cuda::rasterize(
+        RasterizeArgs<T>{grid, band_tiles + max_extra, t.range_begin.data(), t.range_end.data(), t.split_slot.data(),
+                         t.labels.data(), task_counters(), buffers.pairs.values[buffers.pairs.current].data(),
+                         buffers.gaussians.projected.data(), f.view, f.background, f.tail,
+                         buffers.pixels.partials.data(), rgb8, rgb_float},
+        stream);
     events.record(Event::rasterize, stream);
 }
 
@@ -449,8 +456,8 @@ void CudaRenderer<T>::Impl::copy_out(const Frame<T>& f, ImageRGB8* rgb8, ImageF*
                                rgb_float ? buffers.pixels.image_float.data() : nullptr, &host.rgb8, &host.rgb_float},
                    s);
     events.record(Event::copy_out, s);
-    CATGS_CUDA_CHECK(
-        cudaMemcpyAsync(host.counters.data(), buffers.window.counters.data(), sizeof(Counters), cudaMemcpyDeviceToHost, s));
+    CATGS_CUDA_CHECK(cudaMemcpyAsync(host.counters.data(), buffers.window.counters.data(), sizeof(Counters),
+                                     cudaMemcpyDeviceToHost, s));
     CATGS_CUDA_CHECK(cudaStreamSynchronize(s));
     if (rgb8) {
         rgb8->width = f.view.width;

@@ -70,6 +70,8 @@ void DeviceScene::free_all() {
     cudaFree(all_chunks_);
 }
 
-DeviceScene::~DeviceScene() { free_all(); }
+DeviceScene::~DeviceScene() {
+    free_all();
+}
 
 }  // namespace catgs::cuda

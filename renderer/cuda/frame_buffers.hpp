@@ -31,12 +31,14 @@ struct WindowBuffers {
 
 /// Per chunk of the scene: chunk culling's flags and the compacted list of visible chunks.
 struct ChunkBuffers {
-    DeviceArray<std::uint8_t> flags;  // 1 = some pose may see the chunk
+    DeviceArray<std::uint8_t> flags;      // 1 = some pose may see the chunk
     DeviceArray<std::uint32_t> selected;  // the visible chunks, in scene order
     DeviceArray<std::uint32_t> selected_count;
     DeviceArray<std::uint8_t> select_temp;  // CUB's DeviceSelect
 
-    std::size_t bytes() const { return flags.bytes() + selected.bytes() + selected_count.bytes() + select_temp.bytes(); }
+    std::size_t bytes() const {
+        return flags.bytes() + selected.bytes() + selected_count.bytes() + select_temp.bytes();
+    }
 };
 
 /// Per Gaussian: the projection by Gaussian index, and the counts, depths and offsets by slot
@@ -75,9 +77,9 @@ struct PairBuffers {
 /// Per tile, and per task of the task list: ranges, split slots and labels.
 struct TileBuffers {
     DeviceArray<std::uint64_t> range_begin, range_end;  // ranges
-    DeviceArray<std::uint32_t> split_slot;   // split: first partial slot of a split tile, or kNoSlot
-    DeviceArray<std::uint32_t> split_tiles;  // split: the tiles merge composites
-    DeviceArray<TaskLabel> labels;           // split: the extra sub-tasks
+    DeviceArray<std::uint32_t> split_slot;              // split: first partial slot of a split tile, or kNoSlot
+    DeviceArray<std::uint32_t> split_tiles;             // split: the tiles merge composites
+    DeviceArray<TaskLabel> labels;                      // split: the extra sub-tasks
 
     std::size_t bytes() const {
         return range_begin.bytes() + range_end.bytes() + split_slot.bytes() + split_tiles.bytes() + labels.bytes();
@@ -137,10 +139,10 @@ private:
 template <typename T>
 struct HostStaging {
     PinnedArray<View<T>> views;
-    PinnedArray<std::uint64_t> total;          // one read-back per scan
-    PinnedArray<std::uint32_t> selected;       // the visible chunk count of a key frame
+    PinnedArray<std::uint64_t> total;     // one read-back per scan
+    PinnedArray<std::uint32_t> selected;  // the visible chunk count of a key frame
     PinnedArray<Counters> counters;
-    PinnedArray<std::uint8_t> rgb8;            // copy_out
+    PinnedArray<std::uint8_t> rgb8;  // copy_out
     PinnedArray<float> rgb_float;
 };
 

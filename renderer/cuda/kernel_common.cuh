@@ -13,13 +13,15 @@
 
 namespace catgs::cuda {
 
-inline constexpr int kThreads = 256;                        // one Gaussian / pair / tile per thread
+inline constexpr int kThreads = 256;                       // one Gaussian / pair / tile per thread
 inline constexpr int kTilePixels = kTileSize * kTileSize;  // one thread per pixel of a tile
 
 /// A tile that is not split has no partial slots.
 inline constexpr std::uint32_t kNoSlot = 0xffffffffu;
 
-inline unsigned blocks_for(std::uint64_t n, int threads) { return static_cast<unsigned>((n + threads - 1) / threads); }
+inline unsigned blocks_for(std::uint64_t n, int threads) {
+    return static_cast<unsigned>((n + threads - 1) / threads);
+}
 
 struct DeviceSceneView {
     const float* positions;
@@ -35,18 +37,18 @@ struct DeviceSceneView {
 /// every frame; the task part belongs to the task list, which cached frames reuse from their
 /// key frame, so only a key frame's split pass resets it.
 struct FrameCounters {
-    unsigned long long visible;       // Gaussians with tiles at the actual pose
-    unsigned int min_depth_bits;      // float bits of the nearest depth (positive floats order as ints)
-    unsigned int max_extent_bits;     // float bits of the largest non-full-grid half-extent
-    double inverse_depth_sum;         // over visible Gaussians at the actual pose
+    unsigned long long visible;    // Gaussians with tiles at the actual pose
+    unsigned int min_depth_bits;   // float bits of the nearest depth (positive floats order as ints)
+    unsigned int max_extent_bits;  // float bits of the largest non-full-grid half-extent
+    double inverse_depth_sum;      // over visible Gaussians at the actual pose
 };
 struct TaskCounters {
     unsigned long long rendered_pairs;  // ranges: pairs inside the grid (cached frames park others)
-    unsigned int nonempty_tiles;      // ranges
-    unsigned int split_k;             // the k used (auto or fixed)
-    unsigned int extra_tasks;         // split: atomic task counter beyond the tiles
-    unsigned int split_slots;         // split: partial slots handed out
-    unsigned int split_tiles;         // split: tiles that were split
+    unsigned int nonempty_tiles;        // ranges
+    unsigned int split_k;               // the k used (auto or fixed)
+    unsigned int extra_tasks;           // split: atomic task counter beyond the tiles
+    unsigned int split_slots;           // split: partial slots handed out
+    unsigned int split_tiles;           // split: tiles that were split
 };
 struct Counters {
     FrameCounters frame;
@@ -78,8 +80,8 @@ struct ChunkSpace {
 
 __device__ inline GaussianRef gaussian_ref(const DeviceSceneView& scene, std::uint64_t i) {
     const std::size_t sh_stride = 3u * static_cast<std::size_t>(sh_coefficient_count(scene.sh_degree));
-    return GaussianRef{scene.positions + 3 * i, scene.scales + 3 * i, scene.rotations + 4 * i, scene.opacities[i],
-                       scene.sh + sh_stride * i, scene.sh_degree};
+    return GaussianRef{scene.positions + 3 * i, scene.scales + 3 * i,     scene.rotations + 4 * i,
+                       scene.opacities[i],      scene.sh + sh_stride * i, scene.sh_degree};
 }
 
 /// Projects Gaussian i against the window's poses; returns the mask of valid poses. Shared by

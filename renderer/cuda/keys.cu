@@ -69,7 +69,8 @@ __global__ void count_band_kernel(ChunkSpace space, const Projected<T>* projecte
     std::uint64_t i = 0;
     touched[slot] = visible[slot] == 0 || !space.gaussian(slot, i)
                         ? 0
-                        : for_each_touched_tile(projected[i], culling, view, [](std::uint32_t) {}, rows);
+                        : for_each_touched_tile(
+                              projected[i], culling, view, [](std::uint32_t) {}, rows);
 }
 
 }  // namespace
@@ -98,8 +99,8 @@ void rekey(const RekeyArgs<T>& a, cudaStream_t s) {
 template <typename T>
 void count_band(const CountBandArgs<T>& a, cudaStream_t s) {
     if (a.space.slots == 0) return;
-    count_band_kernel<T><<<blocks_for(a.space.slots, kThreads), kThreads, 0, s>>>(a.space, a.projected, a.visible, a.view,
-                                                                                a.culling, a.rows, a.touched);
+    count_band_kernel<T><<<blocks_for(a.space.slots, kThreads), kThreads, 0, s>>>(a.space, a.projected, a.visible,
+                                                                                  a.view, a.culling, a.rows, a.touched);
     CATGS_CUDA_CHECK_LAUNCH("count_band_kernel");
 }
 

@@ -21,7 +21,7 @@ template <typename T>
 struct KeysArgs {
     DeviceSceneView scene;
     ChunkSpace space;
-    const View<T>* views;   // the window's poses
+    const View<T>* views;  // the window's poses
     int window;
     Culling culling;
     T guard;
@@ -29,9 +29,9 @@ struct KeysArgs {
     const std::uint64_t* touched;
     const std::uint64_t* offsets;
     const float* sort_depth;
-    TileRows rows;          // the band's tile rows (all of them when not banded)
-    bool band;              // banded: one pose, whose geometry preprocess stored
-    bool reprojected;       // the window lowered the near plane (PreprocessArgs::reproject_actual)
+    TileRows rows;           // the band's tile rows (all of them when not banded)
+    bool band;               // banded: one pose, whose geometry preprocess stored
+    bool reprojected;        // the window lowered the near plane (PreprocessArgs::reproject_actual)
     std::uint64_t capacity;  // bounds every write
     std::uint64_t* keys;
     std::uint32_t* values;
@@ -43,9 +43,9 @@ void keys(const KeysArgs<T>& args, cudaStream_t stream);
 template <typename T>
 struct RekeyArgs {
     std::uint64_t pairs;
-    const std::uint64_t* emitted_keys;   // the key frame's pairs in emission order
+    const std::uint64_t* emitted_keys;  // the key frame's pairs in emission order
     const std::uint32_t* emitted_values;
-    const Projected<T>* projected;       // at the current pose (reproject)
+    const Projected<T>* projected;  // at the current pose (reproject)
     View<T> view;
     Culling culling;
     std::uint64_t* keys;

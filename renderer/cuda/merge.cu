@@ -18,9 +18,11 @@ __global__ void __launch_bounds__(kTilePixels)
     const int y = static_cast<int>(tile / view.tiles_x) * kTileSize + threadIdx.y;
     if (x >= view.width || y >= view.height) return;
     const std::uint32_t parts = split_count(range_end[tile] - range_begin[tile], counters->split_k) + 1;
-    const std::size_t base = static_cast<std::size_t>(split_slot[tile]) * kTilePixels + threadIdx.y * kTileSize + threadIdx.x;
+    const std::size_t base =
+        static_cast<std::size_t>(split_slot[tile]) * kTilePixels + threadIdx.y * kTileSize + threadIdx.x;
     MergeState<T> m;
-    for (std::uint32_t i = 0; i < parts && !m.done; ++i) merge_partial(m, partials[base + static_cast<std::size_t>(i) * kTilePixels]);
+    for (std::uint32_t i = 0; i < parts && !m.done; ++i)
+        merge_partial(m, partials[base + static_cast<std::size_t>(i) * kTilePixels]);
     PixelAccumulator<T> acc;
     acc.colour = m.colour;
     acc.transmittance = m.transmittance;

@@ -16,7 +16,7 @@ namespace catgs::cuda {
 
 template <typename T>
 struct MergeArgs {
-    std::uint64_t blocks;      // at least the split tiles
+    std::uint64_t blocks;  // at least the split tiles
     const std::uint32_t* split_tiles;
     const std::uint32_t* split_slot;
     const std::uint64_t* range_begin;
@@ -25,7 +25,7 @@ struct MergeArgs {
     const Partial<T>* partials;
     View<T> view;
     Vec3<T> background;
-    std::uint8_t* out_rgb8;    // either may be null
+    std::uint8_t* out_rgb8;  // either may be null
     float* out_float;
 };
 

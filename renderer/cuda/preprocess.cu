@@ -17,8 +17,8 @@ namespace {
 // rasterizing (opacity 0 when culled there). Key frames of the cache also reduce what the
 // planner needs: nearest depth, mean inverse depth, largest footprint.
 template <typename T, int MaxWindow, bool Summarize>
-__global__ void preprocess_kernel(DeviceSceneView scene, ChunkSpace space, const View<T>* views, int window, View<T> actual,
-                                  bool reproject_actual, Culling culling, T guard, T guard_translation,
+__global__ void preprocess_kernel(DeviceSceneView scene, ChunkSpace space, const View<T>* views, int window,
+                                  View<T> actual, bool reproject_actual, Culling culling, T guard, T guard_translation,
                                   Projected<T>* projected, std::uint64_t* touched, float* sort_depth,
                                   FrameCounters* counters) {
     const std::uint64_t slot = static_cast<std::uint64_t>(blockIdx.x) * blockDim.x + threadIdx.x;
@@ -123,13 +123,13 @@ void preprocess(const PreprocessArgs<T>& a, cudaStream_t s) {
     if (a.space.slots == 0) return;
     const unsigned blocks = blocks_for(a.space.slots, kThreads);
     if (a.window == 1 && !a.summarize)
-        preprocess_kernel<T, 1, false><<<blocks, kThreads, 0, s>>>(
-            a.scene, a.space, a.views, 1, a.actual, a.reproject_actual, a.culling, a.guard, a.guard_translation,
-            a.projected, a.touched, a.sort_depth, a.counters);
+        preprocess_kernel<T, 1, false>
+            <<<blocks, kThreads, 0, s>>>(a.scene, a.space, a.views, 1, a.actual, a.reproject_actual, a.culling, a.guard,
+                                         a.guard_translation, a.projected, a.touched, a.sort_depth, a.counters);
     else if (a.window == 1)
-        preprocess_kernel<T, 1, true><<<blocks, kThreads, 0, s>>>(
-            a.scene, a.space, a.views, 1, a.actual, a.reproject_actual, a.culling, a.guard, a.guard_translation,
-            a.projected, a.touched, a.sort_depth, a.counters);
+        preprocess_kernel<T, 1, true>
+            <<<blocks, kThreads, 0, s>>>(a.scene, a.space, a.views, 1, a.actual, a.reproject_actual, a.culling, a.guard,
+                                         a.guard_translation, a.projected, a.touched, a.sort_depth, a.counters);
     else
         preprocess_kernel<T, kMaxWindow, true><<<blocks, kThreads, 0, s>>>(
             a.scene, a.space, a.views, a.window, a.actual, a.reproject_actual, a.culling, a.guard, a.guard_translation,
@@ -141,7 +141,7 @@ template <typename T>
 void reproject(const ReprojectArgs<T>& a, cudaStream_t s) {
     if (a.space.slots == 0) return;
     reproject_kernel<T><<<blocks_for(a.space.slots, kThreads), kThreads, 0, s>>>(a.scene, a.space, a.actual, a.touched,
-                                                                               a.projected, a.counters);
+                                                                                 a.projected, a.counters);
     CATGS_CUDA_CHECK_LAUNCH("reproject_kernel");
 }
 

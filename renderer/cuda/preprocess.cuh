@@ -19,13 +19,13 @@ template <typename T>
 struct PreprocessArgs {
     DeviceSceneView scene;
     ChunkSpace space;
-    const View<T>* views;    // the window's poses, with the (maybe lowered) near plane
+    const View<T>* views;  // the window's poses, with the (maybe lowered) near plane
     int window;
-    View<T> actual;          // the pose the frame is rendered at
-    bool reproject_actual;   // the window lowered the near plane: project the actual pose again
+    View<T> actual;         // the pose the frame is rendered at
+    bool reproject_actual;  // the window lowered the near plane: project the actual pose again
     Culling culling;
     T guard, guard_translation;
-    bool summarize;          // reduce nearest depth, inverse depth and extent (a cached window)
+    bool summarize;           // reduce nearest depth, inverse depth and extent (a cached window)
     Projected<T>* projected;  // by Gaussian
     std::uint64_t* touched;   // by slot, plus the trailing 0 the scan needs
     float* sort_depth;        // by slot
@@ -38,7 +38,7 @@ void preprocess(const PreprocessArgs<T>& args, cudaStream_t stream);
 template <typename T>
 struct ReprojectArgs {
     DeviceSceneView scene;
-    ChunkSpace space;        // the key frame's
+    ChunkSpace space;  // the key frame's
     View<T> actual;
     const std::uint64_t* touched;  // the key frame's counts: 0 = not in the lists
     Projected<T>* projected;

@@ -106,7 +106,8 @@ __global__ void __launch_bounds__(kTilePixels)
     if (slot == kNoSlot) {
         write_pixel(acc, background, 3 * (static_cast<std::size_t>(y) * view.width + x), out_rgb8, out_float);
     } else {
-        partials[(static_cast<std::size_t>(slot) + index) * kTilePixels + rank] = Partial<T>{acc.colour, acc.transmittance};
+        partials[(static_cast<std::size_t>(slot) + index) * kTilePixels + rank] =
+            Partial<T>{acc.colour, acc.transmittance};
     }
 }
 

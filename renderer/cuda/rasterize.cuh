@@ -20,16 +20,16 @@ namespace catgs::cuda {
 struct TaskGrid {
     std::uint32_t first_tile;  // tiles of this band: [first_tile, first_tile + band_tiles)
     std::uint32_t band_tiles;
-    bool split;                // split_slot / labels / partials are valid
-    bool shared_list;          // exact culling: one list for every tile
+    bool split;        // split_slot / labels / partials are valid
+    bool shared_list;  // exact culling: one list for every tile
     std::uint64_t list_size;
-    bool warp_skip;            // warps skip Gaussians whose visible_box misses their block
+    bool warp_skip;  // warps skip Gaussians whose visible_box misses their block
 };
 
 template <typename T>
 struct RasterizeArgs {
     TaskGrid grid;
-    std::uint64_t blocks;      // the band's tiles plus room for its extra sub-tasks
+    std::uint64_t blocks;  // the band's tiles plus room for its extra sub-tasks
     const std::uint64_t* range_begin;
     const std::uint64_t* range_end;
     const std::uint32_t* split_slot;
@@ -39,9 +39,9 @@ struct RasterizeArgs {
     const Projected<T>* projected;
     View<T> view;
     Vec3<T> background;
-    T tail_transmittance;      // where a split tile's later sub-tasks stop
+    T tail_transmittance;  // where a split tile's later sub-tasks stop
     Partial<T>* partials;
-    std::uint8_t* out_rgb8;    // either may be null
+    std::uint8_t* out_rgb8;  // either may be null
     float* out_float;
 };
 

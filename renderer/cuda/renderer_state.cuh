@@ -67,9 +67,9 @@ struct CudaRenderer<T>::Impl {
     StageEvents events;
     FramePlanner planner;
     // The planner plans cached frames only after key_rendered, for lists the device holds.
-    std::uint64_t cached_pairs = 0;     // pairs of the cached lists
-    bool cached_split = false;          // the cached task list has split tiles
-    ChunkSpace key_space{};             // the key frame's compacted index space (cached frames reuse it)
+    std::uint64_t cached_pairs = 0;  // pairs of the cached lists
+    bool cached_split = false;       // the cached task list has split tiles
+    ChunkSpace key_space{};          // the key frame's compacted index space (cached frames reuse it)
     std::uint64_t key_chunks_culled = 0;
     FrameBuffers<T> buffers;
     HostStaging<T> host;
@@ -113,9 +113,9 @@ struct CudaRenderer<T>::Impl {
     }
     DeviceSceneView scene_view() const {
         const DeviceScene& s = *scene;
-        return DeviceSceneView{s.positions(), s.scales(), s.rotations(), s.opacities(), s.sh(), s.sh_degree(), s.count()};
+        return DeviceSceneView{s.positions(), s.scales(),    s.rotations(), s.opacities(),
+                               s.sh(),        s.sh_degree(), s.count()};
     }
 };
-
 
 }  // namespace catgs::cuda

@@ -10,11 +10,11 @@
 namespace catgs::cuda {
 
 struct ScanArgs {
-    std::uint64_t* counts;         // n + 1 entries, the last 0 (not const: CUB is instantiated as before)
-    std::uint64_t* offsets;        // n + 1 entries: offsets[n] is the total
+    std::uint64_t* counts;   // n + 1 entries, the last 0 (not const: CUB is instantiated as before)
+    std::uint64_t* offsets;  // n + 1 entries: offsets[n] is the total
     std::uint64_t n;
     DeviceArray<std::uint8_t>* temp;
-    std::uint64_t* host_total;     // pinned
+    std::uint64_t* host_total;  // pinned
 };
 
 /// Returns the pass total (one read-back: synchronises the stream).

@@ -14,8 +14,8 @@ void sort(const SortArgs& a, cudaStream_t s) {
     cub::DoubleBuffer<std::uint32_t> vb(p.values[p.current].data(), p.values[1 - p.current].data());
     const int end_bit = kSortKeyDepthBits + a.tile_bits;
     std::size_t temp_bytes = 0;
-    CATGS_CUDA_CHECK(
-        cub::DeviceRadixSort::SortPairs(nullptr, temp_bytes, kb, vb, static_cast<std::int64_t>(a.count), 0, end_bit, s));
+    CATGS_CUDA_CHECK(cub::DeviceRadixSort::SortPairs(nullptr, temp_bytes, kb, vb, static_cast<std::int64_t>(a.count), 0,
+                                                     end_bit, s));
     p.sort_temp.reserve(temp_bytes, s);
     CATGS_CUDA_CHECK(cub::DeviceRadixSort::SortPairs(p.sort_temp.data(), temp_bytes, kb, vb,
                                                      static_cast<std::int64_t>(a.count), 0, end_bit, s));

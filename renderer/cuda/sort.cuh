@@ -11,7 +11,7 @@
 namespace catgs::cuda {
 
 struct SortArgs {
-    PairBuffers* pairs;   // sorts keys/values[current]; current then names the sorted pair
+    PairBuffers* pairs;  // sorts keys/values[current]; current then names the sorted pair
     std::uint64_t count;
     int tile_bits;
 };

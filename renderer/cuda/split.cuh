@@ -14,8 +14,8 @@ struct SplitArgs {
     std::uint32_t tiles;
     const std::uint64_t* range_begin;
     const std::uint64_t* range_end;
-    std::uint64_t max_extra;     // room in labels
-    bool auto_k;                 // derive k from this frame's lists
+    std::uint64_t max_extra;  // room in labels
+    bool auto_k;              // derive k from this frame's lists
     TaskCounters* counters;
     std::uint32_t* split_slot;
     TaskLabel* labels;

@@ -44,10 +44,10 @@ StageReadback<T> CudaRenderer<T>::read_back_stages() {
     const std::uint64_t labels = std::min<std::uint64_t>(last.tasks.extra_tasks, last.max_extra);  // as rasterize reads
     const std::vector<TaskLabel> extra = copy_to_host(t.labels.data(), labels, s);
     std::vector<std::uint32_t> slot = copy_to_host(t.split_slot.data(), last.split_used ? last.tiles : 0, s);
-    const std::size_t partial_count =
-        last.split_used ? std::min<std::size_t>(std::size_t{last.tasks.split_slots} * kTilePixels,
-                                                m.buffers.pixels.partials.capacity())
-                        : 0;
+    const std::size_t partial_count = last.split_used
+                                          ? std::min<std::size_t>(std::size_t{last.tasks.split_slots} * kTilePixels,
+                                                                  m.buffers.pixels.partials.capacity())
+                                          : 0;
     std::vector<Partial<T>> partials = copy_to_host(m.buffers.pixels.partials.data(), partial_count, s);
     CATGS_CUDA_CHECK(cudaStreamSynchronize(s));
 
@@ -57,8 +57,9 @@ StageReadback<T> CudaRenderer<T>::read_back_stages() {
     r.tasks.resize(last.tiles);
     for (std::uint32_t i = 0; i < last.tiles; ++i) r.tasks[i] = TileTask{i, 0};
     for (const TaskLabel& l : extra) r.tasks.push_back(TileTask{l.tile, l.index});
-    std::sort(r.tasks.begin() + static_cast<std::ptrdiff_t>(last.tiles), r.tasks.end(),
-              [](const TileTask& a, const TileTask& b) { return a.tile != b.tile ? a.tile < b.tile : a.index < b.index; });
+    std::sort(
+        r.tasks.begin() + static_cast<std::ptrdiff_t>(last.tiles), r.tasks.end(),
+        [](const TileTask& a, const TileTask& b) { return a.tile != b.tile ? a.tile < b.tile : a.index < b.index; });
     if (!last.split_used) return r;
     r.split_k = last.tasks.split_k;
     r.split_slot = std::move(slot);

@@ -38,8 +38,7 @@ ImageRGB8 read_image_rgb8(const std::string& path) {
         throw Error(path + ": cannot read image: " + in->geterror());
     image.rgb.resize(static_cast<std::size_t>(spec.width) * spec.height * 3);
     for (std::size_t p = 0; p < image.rgb.size() / 3; ++p)
-        for (int c = 0; c < 3; ++c)
-            image.rgb[3 * p + c] = all[p * spec.nchannels + (spec.nchannels >= 3 ? c : 0)];
+        for (int c = 0; c < 3; ++c) image.rgb[3 * p + c] = all[p * spec.nchannels + (spec.nchannels >= 3 ? c : 0)];
     return image;
 }
 

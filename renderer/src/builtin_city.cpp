@@ -39,17 +39,28 @@ void sincos_turns(double turns, double& s, double& c) {
     const double x = (quarter_turns - quadrant) * (0.5 * kPi);
     const double x2 = x * x;
     double sx = 1.0 / 6227020800.0;  // 1/13!
-    for (double d : {-1.0 / 39916800.0, 1.0 / 362880.0, -1.0 / 5040.0, 1.0 / 120.0, -1.0 / 6.0, 1.0})
-        sx = sx * x2 + d;
+    for (double d : {-1.0 / 39916800.0, 1.0 / 362880.0, -1.0 / 5040.0, 1.0 / 120.0, -1.0 / 6.0, 1.0}) sx = sx * x2 + d;
     sx *= x;
     double cx = -1.0 / 87178291200.0;  // -1/14!
     for (double d : {1.0 / 479001600.0, -1.0 / 3628800.0, 1.0 / 40320.0, -1.0 / 720.0, 1.0 / 24.0, -0.5, 1.0})
         cx = cx * x2 + d;
     switch (static_cast<int>(quadrant) & 3) {
-        case 0: s = sx; c = cx; break;
-        case 1: s = cx; c = -sx; break;
-        case 2: s = -sx; c = -cx; break;
-        default: s = -cx; c = sx; break;
+        case 0:
+            s = sx;
+            c = cx;
+            break;
+        case 1:
+            s = cx;
+            c = -sx;
+            break;
+        case 2:
+            s = -sx;
+            c = -cx;
+            break;
+        default:
+            s = -cx;
+            c = sx;
+            break;
     }
 }
 
@@ -70,7 +81,9 @@ double value_noise(std::uint64_t key, double x, double y, double cell) {
     return (a + (b - a) * sx) + ((c + (d - c) * sx) - (a + (b - a) * sx)) * sy;
 }
 
-double fraction(double x) { return x - std::floor(x); }
+double fraction(double x) {
+    return x - std::floor(x);
+}
 
 // Rotation whose columns are (u, v, n): the Gaussian's scale axes in the world. Converted
 // through camera_to_world_quaternion, whose pose stores that rotation transposed.
@@ -96,7 +109,7 @@ constexpr double kShC1 = 0.4886025119029199;
 constexpr double kShC2[5] = {1.0925484305920792, -1.0925484305920792, 0.31539156525252005, -1.0925484305920792,
                              0.5462742152960396};
 constexpr double kShC3[7] = {-0.5900435899266435, 2.890611442640554, -0.4570457994644658, 0.3731763325901154,
-                             -0.4570457994644658, 1.445305721320277,  -0.5900435899266435};
+                             -0.4570457994644658, 1.445305721320277, -0.5900435899266435};
 
 // A coefficient vector w_l * Y_lm(r) adds gloss * sum_l w_l (2l+1)/(4 pi) P_l(r . dir) to
 // the colour: a lobe peaking (at 0.74 * gloss) when the view direction is r and dipping to
@@ -186,9 +199,13 @@ struct Appearance {
     double gloss;  ///< peak of the view-dependent lobe, times 0.74
 };
 
-double opaque(Rng& rng) { return rng.uniform(0.9, 0.98); }
+double opaque(Rng& rng) {
+    return rng.uniform(0.9, 0.98);
+}
 
-bool on_line(double offset, double centre) { return std::abs(offset - centre) < kLineHalfWidth; }
+bool on_line(double offset, double centre) {
+    return std::abs(offset - centre) < kLineHalfWidth;
+}
 
 // Asphalt with markings, for a point `along` a road at `offset` from its centre line.
 Rgb road_colour(double along, double offset) {
@@ -229,8 +246,7 @@ Appearance ground_look(const Layout& layout, double x, double y, Rng& rng) {
     std::size_t i = 0, j = 0;
     while (i + 1 < kLotsPerAxis && x > layout.lots[i].second) ++i;
     while (j + 1 < kLotsPerAxis && y > layout.lots[j].second) ++j;
-    if (layout.park[j * kLotsPerAxis + i])
-        return {(0.75 + 0.3 * coarse + 0.25 * fine) * kGrass, opaque(rng), 0.02};
+    if (layout.park[j * kLotsPerAxis + i]) return {(0.75 + 0.3 * coarse + 0.25 * fine) * kGrass, opaque(rng), 0.02};
     const double joint = paving_joint(x, y, kPlazaTile) ? 0.85 : 1.0;
     return {(joint * shade) * kPlaza, opaque(rng), 0.03};
 }
@@ -244,10 +260,11 @@ Appearance facade_look(const Surface& s, double a, double b, Rng& rng) {
     const double margin = 0.5 * (look.window_spacing - look.window_width);
     const bool away_from_corner = a > 1.0 && a < s.extent_u - 1.0;
     const bool ground_floor = b < look.floor_height;
-    const bool window = away_from_corner && (ground_floor ? in_floor > 0.4 && in_floor < look.floor_height - 0.6 &&
-                                                                in_bay > 0.2 && in_bay < look.window_spacing - 0.2
-                                                          : in_floor > 0.9 && in_floor < 0.9 + 0.5 * look.floor_height &&
-                                                                in_bay > margin && in_bay < look.window_spacing - margin);
+    const bool window =
+        away_from_corner && (ground_floor ? in_floor > 0.4 && in_floor < look.floor_height - 0.6 && in_bay > 0.2 &&
+                                                in_bay < look.window_spacing - 0.2
+                                          : in_floor > 0.9 && in_floor < 0.9 + 0.5 * look.floor_height &&
+                                                in_bay > margin && in_bay < look.window_spacing - margin);
     if (window) return {(0.9 + 0.2 * rng.uniform()) * look.accent, rng.uniform(0.95, 0.99), 0.25};
     return {shade * look.base, opaque(rng), 0.04};
 }
@@ -271,8 +288,8 @@ struct Output {
     std::size_t sh_stride;
 };
 
-void write_gaussian(const Output& out, std::uint64_t i, const V3& p, const std::array<double, 3>& scale,
-                    const Quat& q, const Appearance& look, const ShLobe& lobe) {
+void write_gaussian(const Output& out, std::uint64_t i, const V3& p, const std::array<double, 3>& scale, const Quat& q,
+                    const Appearance& look, const ShLobe& lobe) {
     const std::size_t g = static_cast<std::size_t>(i);
     out.positions[3 * g] = static_cast<float>(p.x);
     out.positions[3 * g + 1] = static_cast<float>(p.y);
@@ -345,10 +362,18 @@ void emit(const Layout& layout, const Surface& s, std::uint64_t k, std::uint64_t
     const V3 p = s.origin + a * s.u + b * s.v;
     Appearance look{};
     switch (s.material) {
-        case Material::Ground: look = ground_look(layout, p.x, p.y, rng); break;
-        case Material::Facade: look = facade_look(s, a, b, rng); break;
-        case Material::Roof: look = roof_look(s, a, b, rng); break;
-        default: look = {(0.9 + 0.1 * rng.uniform()) * s.look.base, opaque(rng), 0.15}; break;  // roof units
+        case Material::Ground:
+            look = ground_look(layout, p.x, p.y, rng);
+            break;
+        case Material::Facade:
+            look = facade_look(s, a, b, rng);
+            break;
+        case Material::Roof:
+            look = roof_look(s, a, b, rng);
+            break;
+        default:
+            look = {(0.9 + 0.1 * rng.uniform()) * s.look.base, opaque(rng), 0.15};
+            break;  // roof units
     }
     write_gaussian(out, i, p, scale, spin_about_normal(s.frame, spin_c, spin_s), look, s.lobe);
 }
@@ -385,12 +410,12 @@ Scene make_city_with_threads(const CityParams& params, const Progress& progress,
     const auto is_building = [](const Surface& s) {
         return s.material == Material::Facade || s.material == Material::Roof || s.material == Material::Metal;
     };
-    const auto buildings_begin = static_cast<std::size_t>(
-        std::find_if(surfaces.begin(), surfaces.end(), is_building) - surfaces.begin());
-    const auto trees_begin = static_cast<std::size_t>(
-        std::find_if(surfaces.begin() + static_cast<std::ptrdiff_t>(buildings_begin), surfaces.end(),
-                     [&](const Surface& s) { return !is_building(s); }) -
-        surfaces.begin());
+    const auto buildings_begin =
+        static_cast<std::size_t>(std::find_if(surfaces.begin(), surfaces.end(), is_building) - surfaces.begin());
+    const auto trees_begin =
+        static_cast<std::size_t>(std::find_if(surfaces.begin() + static_cast<std::ptrdiff_t>(buildings_begin),
+                                              surfaces.end(), [&](const Surface& s) { return !is_building(s); }) -
+                                 surfaces.begin());
     const std::uint64_t building_budget = n * kBuildingPercent / 100, tree_budget = n * kTreePercent / 100;
     share_out(surfaces, 0, buildings_begin, n - building_budget - tree_budget);
     share_out(surfaces, buildings_begin, trees_begin, building_budget);

@@ -30,7 +30,9 @@ inline std::uint64_t mix64(std::uint64_t z) {
     return z ^ (z >> 31);
 }
 
-inline double unit_from_bits(std::uint64_t bits) { return static_cast<double>(bits >> 11) * 0x1.0p-53; }
+inline double unit_from_bits(std::uint64_t bits) {
+    return static_cast<double>(bits >> 11) * 0x1.0p-53;
+}
 
 // splitmix64: tiny state, so one can be made per Gaussian from its index for free.
 class Rng {
@@ -52,13 +54,19 @@ inline constexpr std::uint64_t kLayoutStream = 0x6C61796F7574ull;
 inline constexpr std::uint64_t kNoiseStream = 0x6E6F697365ull;
 inline constexpr std::uint64_t kGaussianStream = 0x676175737331ull;
 
-inline std::uint64_t stream_key(std::uint64_t seed, std::uint64_t stream) { return mix64(mix64(seed) ^ stream); }
+inline std::uint64_t stream_key(std::uint64_t seed, std::uint64_t stream) {
+    return mix64(mix64(seed) ^ stream);
+}
 
 // ---------------------------------------------------------------------------------------
 // Vectors, frames, quaternions
 
-inline V3 cross(const V3& a, const V3& b) { return {a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x}; }
-inline V3 normalised(const V3& a) { return (1.0 / std::sqrt(dot(a, a))) * a; }
+inline V3 cross(const V3& a, const V3& b) {
+    return {a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x};
+}
+inline V3 normalised(const V3& a) {
+    return (1.0 / std::sqrt(dot(a, a))) * a;
+}
 
 using Quat = std::array<double, 4>;  // (w, x, y, z)
 
@@ -74,7 +82,9 @@ using ShLobe = std::array<double, kShRestCoefficients>;
 struct Rgb {
     double r, g, b;
 };
-inline Rgb operator*(double s, Rgb c) { return {s * c.r, s * c.g, s * c.b}; }
+inline Rgb operator*(double s, Rgb c) {
+    return {s * c.r, s * c.g, s * c.b};
+}
 
 enum class Shape : std::uint8_t { Rect, Cylinder, Ellipsoid };
 enum class Material : std::uint8_t { Ground, Facade, Roof, Metal, Bark, Leaves };

@@ -37,7 +37,8 @@ const std::array<Rgb, 6> kWallColours{{{0.62, 0.61, 0.58},
                                        {0.85, 0.85, 0.82},
                                        {0.50, 0.55, 0.60},
                                        {0.80, 0.72, 0.55}}};
-const std::array<Rgb, 4> kGlassColours{{{0.12, 0.18, 0.24}, {0.10, 0.22, 0.25}, {0.20, 0.22, 0.25}, {0.15, 0.15, 0.20}}};
+const std::array<Rgb, 4> kGlassColours{
+    {{0.12, 0.18, 0.24}, {0.10, 0.22, 0.25}, {0.20, 0.22, 0.25}, {0.15, 0.15, 0.20}}};
 const std::array<Rgb, 4> kRoofColours{{{0.35, 0.35, 0.35}, {0.25, 0.25, 0.27}, {0.55, 0.55, 0.52}, {0.30, 0.40, 0.25}}};
 const std::array<Rgb, 4> kLeafColours{{{0.20, 0.38, 0.14}, {0.26, 0.42, 0.16}, {0.18, 0.32, 0.15}, {0.30, 0.40, 0.18}}};
 constexpr Rgb kBark{0.33, 0.24, 0.16};
@@ -59,7 +60,9 @@ LotSpans lot_spans() {
     return spans;
 }
 
-Rgb jittered(Rng& rng, Rgb c, double amount) { return (1.0 + amount * rng.symmetric()) * c; }
+Rgb jittered(Rng& rng, Rgb c, double amount) {
+    return (1.0 + amount * rng.symmetric()) * c;
+}
 
 Surface rect(Material material, V3 origin, V3 u, V3 v, double extent_u, double extent_v) {
     Surface s;
@@ -182,8 +185,8 @@ Layout make_layout(std::uint64_t seed) {
     Rng rng(stream_key(seed, kLayoutStream));
     layout.noise_key = stream_key(seed, kNoiseStream);
     layout.lots = lot_spans();
-    layout.surfaces.push_back(rect(Material::Ground, {-kGroundHalfExtent, -kGroundHalfExtent, 0}, {1, 0, 0},
-                                   {0, 1, 0}, 2 * kGroundHalfExtent, 2 * kGroundHalfExtent));
+    layout.surfaces.push_back(rect(Material::Ground, {-kGroundHalfExtent, -kGroundHalfExtent, 0}, {1, 0, 0}, {0, 1, 0},
+                                   2 * kGroundHalfExtent, 2 * kGroundHalfExtent));
 
     for (bool& p : layout.park) p = rng.chance(kParkChance);
     if (std::none_of(layout.park.begin(), layout.park.end(), [](bool p) { return p; }))
@@ -216,8 +219,8 @@ Layout make_layout(std::uint64_t seed) {
     for (bool street_along_x : {true, false})
         for (double c : kRoadCentres)
             for (double side : {-1.0, 1.0})
-                for (double along = -kGroundHalfExtent + kStreetTreeSpacing / 2; along < kGroundHalfExtent - kStreetCanopyMax - 1.0;
-                     along += kStreetTreeSpacing) {
+                for (double along = -kGroundHalfExtent + kStreetTreeSpacing / 2;
+                     along < kGroundHalfExtent - kStreetCanopyMax - 1.0; along += kStreetTreeSpacing) {
                     const double at = along + rng.symmetric();
                     const double across = c + side * kStreetTreeOffset;
                     const double radius = rng.uniform(2.0, kStreetCanopyMax);
@@ -240,8 +243,8 @@ void share_out(std::vector<Surface>& surfaces, std::size_t begin, std::size_t en
     for (std::size_t i = begin; i < end; ++i) {
         cumulative += surfaces[i].area;
         const auto upto = i + 1 == end ? budget
-                                       : std::min(budget, static_cast<std::uint64_t>(
-                                                              std::floor(static_cast<double>(budget) * cumulative / total)));
+                                       : std::min(budget, static_cast<std::uint64_t>(std::floor(
+                                                              static_cast<double>(budget) * cumulative / total)));
         surfaces[i].count = upto - given;
         given = upto;
     }

@@ -32,8 +32,8 @@ std::string builtin_name(const std::string& spec) {
     if (spec.rfind(kBuiltinPrefix, 0) != 0)
         throw Error(spec + ": not a builtin spec (expected builtin:NAME?key=value&...)");
     const std::size_t query = spec.find('?');
-    std::string name = spec.substr(kBuiltinPrefix.size(), query == std::string::npos ? std::string::npos
-                                                                                      : query - kBuiltinPrefix.size());
+    std::string name = spec.substr(kBuiltinPrefix.size(),
+                                   query == std::string::npos ? std::string::npos : query - kBuiltinPrefix.size());
     if (name.empty()) throw Error(spec + ": missing a name after 'builtin:'");
     return name;
 }
@@ -47,7 +47,8 @@ SpecParams builtin_params(const std::string& spec, const std::vector<std::string
         const std::string item = spec.substr(begin, end - begin);
         const std::size_t eq = item.find('=');
         if (item.empty()) throw Error(spec + ": empty parameter (a stray '?' or '&')");
-        if (eq == std::string::npos) throw Error(spec + ": parameter '" + item + "' is missing '=' (expected key=value)");
+        if (eq == std::string::npos)
+            throw Error(spec + ": parameter '" + item + "' is missing '=' (expected key=value)");
         std::string key = item.substr(0, eq), value = item.substr(eq + 1);
         if (std::find(known_keys.begin(), known_keys.end(), key) == known_keys.end())
             throw Error(spec + ": unknown key '" + key + "' (available: " + join(known_keys) + ")");

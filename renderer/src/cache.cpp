@@ -23,7 +23,9 @@ constexpr int kGrowVotes = 2;
 // The speculative near plane never goes below this, so 1/z stays finite.
 constexpr double kMinSpeculativeNear = 1e-3;
 
-glm::dquat to_glm(const std::array<double, 4>& q) { return glm::dquat(q[0], q[1], q[2], q[3]); }
+glm::dquat to_glm(const std::array<double, 4>& q) {
+    return glm::dquat(q[0], q[1], q[2], q[3]);
+}
 
 double frame_interval(const std::deque<Camera>& history) {
     if (history.size() < 2) return kDefaultFrameInterval;
@@ -75,7 +77,8 @@ double rotation_angle(const Pose& a, const Pose& b) {
     const auto& q = b.rotation;
     double r[3][3];
     for (int i = 0; i < 3; ++i)
-        for (int j = 0; j < 3; ++j) r[i][j] = p[3 * i] * q[3 * j] + p[3 * i + 1] * q[3 * j + 1] + p[3 * i + 2] * q[3 * j + 2];
+        for (int j = 0; j < 3; ++j)
+            r[i][j] = p[3 * i] * q[3 * j] + p[3 * i + 1] * q[3 * j + 1] + p[3 * i + 2] * q[3 * j + 2];
     const double sx = r[2][1] - r[1][2], sy = r[0][2] - r[2][0], sz = r[1][0] - r[0][1];
     const double s = 0.5 * std::sqrt(sx * sx + sy * sy + sz * sz);
     const double c = 0.5 * (r[0][0] + r[1][1] + r[2][2] - 1.0);
@@ -175,7 +178,8 @@ FramePlanner::Plan FramePlanner::next(const Camera& actual, const CatgsOptions& 
             const auto& v = *hints->linear_velocity;
             speed = std::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
         } else if (history_.size() >= 2) {
-            speed = distance(camera_centre(history_.back().pose), camera_centre(history_[history_.size() - 2].pose)) / dt;
+            speed =
+                distance(camera_centre(history_.back().pose), camera_centre(history_[history_.size() - 2].pose)) / dt;
         }
         // Typical screen motion per frame, from the last key frame's depths (none yet: keep W).
         if (summary_.mean_inverse_depth > 0) {
@@ -248,15 +252,19 @@ void FramePlanner::reset() {
 }
 
 double FramePlanner::Plan::window_near_plane(const CatgsOptions& options, double near_plane) const {
-    return cache(options) == CacheMode::speculative ? std::max(kMinSpeculativeNear, near_plane - options.guard_translation)
-                                                    : near_plane;
+    return cache(options) == CacheMode::speculative
+               ? std::max(kMinSpeculativeNear, near_plane - options.guard_translation)
+               : near_plane;
 }
 
 const char* cache_mode_name(CacheMode mode) {
     switch (mode) {
-        case CacheMode::off: return "off";
-        case CacheMode::speculative: return "speculative";
-        case CacheMode::unspeculated: return "unspeculated";
+        case CacheMode::off:
+            return "off";
+        case CacheMode::speculative:
+            return "speculative";
+        case CacheMode::unspeculated:
+            return "unspeculated";
     }
     return "?";
 }

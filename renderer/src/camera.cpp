@@ -26,8 +26,7 @@ void validate(const Intrinsics& k, const std::string& what) {
     if (!(std::isfinite(k.fx) && std::isfinite(k.fy) && k.fx > 0 && k.fy > 0))
         throw Error(what + ": focal lengths fx=" + std::to_string(k.fx) + ", fy=" + std::to_string(k.fy) +
                     " must be finite and positive");
-    if (!(std::isfinite(k.cx) && std::isfinite(k.cy)))
-        throw Error(what + ": principal point must be finite");
+    if (!(std::isfinite(k.cx) && std::isfinite(k.cy))) throw Error(what + ": principal point must be finite");
 }
 
 std::array<double, 3> camera_centre(const Pose& p) {
@@ -43,8 +42,7 @@ Pose pose_from_centre(const std::array<double, 3>& c, const std::array<double, 9
     for (int i = 0; i < 3; ++i)
         for (int j = 0; j < 3; ++j) p.rotation[3 * i + j] = c2w[3 * j + i];
     for (int i = 0; i < 3; ++i)
-        p.translation[i] =
-            -(p.rotation[3 * i] * c[0] + p.rotation[3 * i + 1] * c[1] + p.rotation[3 * i + 2] * c[2]);
+        p.translation[i] = -(p.rotation[3 * i] * c[0] + p.rotation[3 * i + 1] * c[1] + p.rotation[3 * i + 2] * c[2]);
     return p;
 }
 
@@ -89,7 +87,12 @@ std::array<double, 4> camera_to_world_quaternion(const Pose& p) {
         y = (m(1, 2) + m(2, 1)) / s;
         z = 0.25 * s;
     }
-    if (w < 0) { w = -w; x = -x; y = -y; z = -z; }
+    if (w < 0) {
+        w = -w;
+        x = -x;
+        y = -y;
+        z = -z;
+    }
     return {w, x, y, z};
 }
 
@@ -104,8 +107,8 @@ Pose look_at(const HostVec3& eye, const HostVec3& target, const HostVec3& up) {
     if (!(rn > 1e-12)) throw Error("look_at: viewing direction is parallel to the up vector");
     right = scaled(right, 1.0 / rn);
     HostVec3 down = cross(forward, right);
-    std::array<double, 9> c2w{right[0], down[0], forward[0], right[1], down[1], forward[1],
-                              right[2], down[2], forward[2]};
+    std::array<double, 9> c2w{right[0],   down[0],  forward[0], right[1],  down[1],
+                              forward[1], right[2], down[2],    forward[2]};
     return pose_from_centre(eye, c2w);
 }
 

@@ -115,7 +115,8 @@ FrameStats CpuRenderer<T>::render(const Scene& scene, const Camera& camera, cons
     stats.split_k = split_k_;
     stats.chunks = scene.chunks.size();
     stats.chunks_culled = chunks_culled_;
-    for (std::size_t i = 0; i < projected_.size(); ++i) stats.visible += tiles_touched_[i] > 0 && projected_[i].opacity > 0;
+    for (std::size_t i = 0; i < projected_.size(); ++i)
+        stats.visible += tiles_touched_[i] > 0 && projected_[i].opacity > 0;
     return stats;
 }
 
@@ -138,8 +139,8 @@ template <typename T>
 std::uint32_t CpuRenderer<T>::project_window(const Scene& scene, std::size_t i, const Window& window,
                                              Projected<T>* poses) const {
     const std::size_t sh_stride = scene.sh_floats_per_gaussian();
-    const GaussianRef g{&scene.positions[3 * i], &scene.scales[3 * i], &scene.rotations[4 * i], scene.opacities[i],
-                        &scene.sh[sh_stride * i], scene.sh_degree};
+    const GaussianRef g{&scene.positions[3 * i], &scene.scales[3 * i],     &scene.rotations[4 * i],
+                        scene.opacities[i],      &scene.sh[sh_stride * i], scene.sh_degree};
     std::uint32_t valid = 0;
     for (std::size_t k = 0; k < window.views.size(); ++k)
         if (project_geometry(g, window.views[k], poses[k])) valid |= 1u << k;
@@ -155,7 +156,8 @@ void CpuRenderer<T>::chunk_cull(const Scene& scene, const Window& window, bool c
     runs_.clear();
     chunks_culled_ = 0;
     if (scene.chunks.empty()) {
-        for (std::size_t b = 0; b < n; b += kChunkGaussians) runs_.push_back({b, std::min<std::size_t>(n, b + kChunkGaussians)});
+        for (std::size_t b = 0; b < n; b += kChunkGaussians)
+            runs_.push_back({b, std::min<std::size_t>(n, b + kChunkGaussians)});
     } else {
         for (const Chunk& c : scene.chunks) {
             if (!cull_chunks || chunk_in_window(c, window.views.data(), w, window.guard, window.guard_translation))
@@ -179,53 +181,56 @@ void CpuRenderer<T>::preprocess(const Scene& scene, const View<T>& actual, const
     window_min_depth_ = std::numeric_limits<double>::infinity();
     uncached_bound_px_ = 0;
     std::mutex min_mutex;
-    parallel_for(runs_.size(), kGaussianGrain / kChunkGaussians, threads_, [&](std::size_t first_run, std::size_t last_run) {
-        Projected<T> poses[kMaxWindow];
-        double local_min = std::numeric_limits<double>::infinity(), local_bound = 0;
-        for (std::size_t run = first_run; run < last_run; ++run) {
-            for (std::size_t i = runs_[run].first; i < runs_[run].second; ++i) {
-                const std::uint32_t valid = project_window(scene, i, window, poses);
-                tiles_touched_[i] =
-                    for_each_window_tile<kMaxWindow>(poses, valid, w, culling, window.guard, window.views[0], [](std::uint32_t) {});
-                if (tiles_touched_[i] == 0) {
-                    // In no list, but close enough to enter the image within the envelope (a near
-                    // Gaussian just outside it moves f dt / z; a needle just outside opens up into
-                    // it): the planner must bound its motion too, or a cached frame misses it.
-                    T bound = T(0);
-                    const float* sc = &scene.scales[3 * i];
-                    if (window.guard > T(0) && culling != Culling::exact && (valid & 1u) &&
-                        uncached_can_enter(poses[0], culling, window.views[0], window.guard, window.guard_translation,
-                                           static_cast<T>(std::max({std::fabs(sc[0]), std::fabs(sc[1]), std::fabs(sc[2])})), bound)) {
-                        local_min = std::min(local_min, static_cast<double>(poses[0].depth));
-                        local_bound = std::max(local_bound, static_cast<double>(bound));
+    parallel_for(
+        runs_.size(), kGaussianGrain / kChunkGaussians, threads_, [&](std::size_t first_run, std::size_t last_run) {
+            Projected<T> poses[kMaxWindow];
+            double local_min = std::numeric_limits<double>::infinity(), local_bound = 0;
+            for (std::size_t run = first_run; run < last_run; ++run) {
+                for (std::size_t i = runs_[run].first; i < runs_[run].second; ++i) {
+                    const std::uint32_t valid = project_window(scene, i, window, poses);
+                    tiles_touched_[i] = for_each_window_tile<kMaxWindow>(poses, valid, w, culling, window.guard,
+                                                                         window.views[0], [](std::uint32_t) {});
+                    if (tiles_touched_[i] == 0) {
+                        // In no list, but close enough to enter the image within the envelope (a near
+                        // Gaussian just outside it moves f dt / z; a needle just outside opens up into
+                        // it): the planner must bound its motion too, or a cached frame misses it.
+                        T bound = T(0);
+                        const float* sc = &scene.scales[3 * i];
+                        if (window.guard > T(0) && culling != Culling::exact && (valid & 1u) &&
+                            uncached_can_enter(
+                                poses[0], culling, window.views[0], window.guard, window.guard_translation,
+                                static_cast<T>(std::max({std::fabs(sc[0]), std::fabs(sc[1]), std::fabs(sc[2])})),
+                                bound)) {
+                            local_min = std::min(local_min, static_cast<double>(poses[0].depth));
+                            local_bound = std::max(local_bound, static_cast<double>(bound));
+                        }
+                        continue;
                     }
-                    continue;
+                    // Keys sort by the depth at the first pose where the Gaussian is visible (the key
+                    // pose, so the key frame itself is exact); the envelope needs the nearest depth
+                    // at any pose.
+                    sort_depth_[i] = poses[first_valid_pose(valid)].key_depth;
+                    for (int k = 0; k < w; ++k)
+                        if (valid >> k & 1u) local_min = std::min(local_min, static_cast<double>(poses[k].depth));
+                    // At the actual pose: pose 0's geometry unless the window lowered the near plane;
+                    // the SH colour only now that the Gaussian is known to touch a tile.
+                    const GaussianRef g{&scene.positions[3 * i], &scene.scales[3 * i],     &scene.rotations[4 * i],
+                                        scene.opacities[i],      &scene.sh[sh_stride * i], scene.sh_degree};
+                    bool at_actual = (valid & 1u) != 0;
+                    if (window.near_plane != actual.near_plane)
+                        at_actual = project_geometry(g, actual, projected_[i]);
+                    else
+                        projected_[i] = poses[0];
+                    if (at_actual)
+                        shade_gaussian(g, actual, projected_[i]);
+                    else
+                        projected_[i].opacity = T(0);
                 }
-                // Keys sort by the depth at the first pose where the Gaussian is visible (the key
-                // pose, so the key frame itself is exact); the envelope needs the nearest depth
-                // at any pose.
-                sort_depth_[i] = poses[first_valid_pose(valid)].key_depth;
-                for (int k = 0; k < w; ++k)
-                    if (valid >> k & 1u) local_min = std::min(local_min, static_cast<double>(poses[k].depth));
-                // At the actual pose: pose 0's geometry unless the window lowered the near plane;
-                // the SH colour only now that the Gaussian is known to touch a tile.
-                const GaussianRef g{&scene.positions[3 * i], &scene.scales[3 * i], &scene.rotations[4 * i],
-                                    scene.opacities[i], &scene.sh[sh_stride * i], scene.sh_degree};
-                bool at_actual = (valid & 1u) != 0;
-                if (window.near_plane != actual.near_plane)
-                    at_actual = project_geometry(g, actual, projected_[i]);
-                else
-                    projected_[i] = poses[0];
-                if (at_actual)
-                    shade_gaussian(g, actual, projected_[i]);
-                else
-                    projected_[i].opacity = T(0);
             }
-        }
-        std::lock_guard lock(min_mutex);
-        window_min_depth_ = std::min(window_min_depth_, local_min);
-        uncached_bound_px_ = std::max(uncached_bound_px_, local_bound);
-    });
+            std::lock_guard lock(min_mutex);
+            window_min_depth_ = std::min(window_min_depth_, local_min);
+            uncached_bound_px_ = std::max(uncached_bound_px_, local_bound);
+        });
 }
 
 // Cached frame: only the Gaussians in the cached lists are projected again, at the actual
@@ -237,8 +242,8 @@ void CpuRenderer<T>::reproject(const Scene& scene, const View<T>& actual) {
     parallel_for(n, kGaussianGrain, threads_, [&](std::size_t begin, std::size_t end) {
         for (std::size_t i = begin; i < end; ++i) {
             if (tiles_touched_[i] == 0) continue;
-            const GaussianRef g{&scene.positions[3 * i], &scene.scales[3 * i], &scene.rotations[4 * i],
-                                scene.opacities[i], &scene.sh[sh_stride * i], scene.sh_degree};
+            const GaussianRef g{&scene.positions[3 * i], &scene.scales[3 * i],     &scene.rotations[4 * i],
+                                scene.opacities[i],      &scene.sh[sh_stride * i], scene.sh_degree};
             if (!project_gaussian(g, actual, projected_[i])) projected_[i].opacity = T(0);
         }
     });

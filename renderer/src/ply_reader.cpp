@@ -257,7 +257,9 @@ private:
 // ---------------------------------------------------------------------------------------
 // Vertex layout: which property feeds which canonical field.
 
-std::string rest_name(int index) { return "f_rest_" + std::to_string(index); }
+std::string rest_name(int index) {
+    return "f_rest_" + std::to_string(index);
+}
 
 /// Canonical field names for a degree: the PLY property each field is read from. f_rest is
 /// channel-major: coefficient k (1..K-1) of channel c is f_rest_{c*(K-1) + k-1}.

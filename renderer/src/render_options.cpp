@@ -37,9 +37,12 @@ std::optional<double> parse_degrees(const std::string& text) {
 
 const char* culling_name(Culling culling) {
     switch (culling) {
-        case Culling::exact: return "exact";
-        case Culling::bbox3sigma: return "bbox3sigma";
-        case Culling::opacity_aware: return "opacity-aware";
+        case Culling::exact:
+            return "exact";
+        case Culling::bbox3sigma:
+            return "bbox3sigma";
+        case Culling::opacity_aware:
+            return "opacity-aware";
     }
     return "?";
 }

@@ -108,9 +108,9 @@ std::string describe(const Scene& s) {
     std::ostringstream o;
     o.precision(10);
     o << "gaussians " << s.count() << ", SH degree " << s.sh_degree << ", bounds [" << s.bounds.min[0] << ", "
-      << s.bounds.min[1] << ", " << s.bounds.min[2] << "] .. [" << s.bounds.max[0] << ", " << s.bounds.max[1]
-      << ", " << s.bounds.max[2] << "], origin [" << s.origin[0] << ", " << s.origin[1] << ", " << s.origin[2]
-      << "], memory " << s.bytes() << " bytes (" << std::fixed;
+      << s.bounds.min[1] << ", " << s.bounds.min[2] << "] .. [" << s.bounds.max[0] << ", " << s.bounds.max[1] << ", "
+      << s.bounds.max[2] << "], origin [" << s.origin[0] << ", " << s.origin[1] << ", " << s.origin[2] << "], memory "
+      << s.bytes() << " bytes (" << std::fixed;
     o.precision(1);
     o << static_cast<double>(s.bytes()) / (1024.0 * 1024.0) << " MiB)";
     return o.str();

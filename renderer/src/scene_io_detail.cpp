@@ -58,11 +58,17 @@ void fail(const std::string& path, const std::string& problem, const std::string
     throw Error(path + ": " + problem + " (" + where + ")");
 }
 
-std::string at_offset(std::uint64_t offset) { return "byte offset " + std::to_string(offset); }
+std::string at_offset(std::uint64_t offset) {
+    return "byte offset " + std::to_string(offset);
+}
 
-std::string at_header_line(std::size_t line) { return "header line " + std::to_string(line); }
+std::string at_header_line(std::size_t line) {
+    return "header line " + std::to_string(line);
+}
 
-std::string at_record(std::uint64_t record) { return "record " + std::to_string(record); }
+std::string at_record(std::uint64_t record) {
+    return "record " + std::to_string(record);
+}
 
 std::string at_field(std::uint64_t record, std::string_view noun, std::string_view name) {
     return at_record(record) + ", " + std::string(noun) + " '" + std::string(name) + "'";
@@ -112,7 +118,9 @@ FileReader::FileReader(const std::string& path) : path_(path) {
     buffer_.resize(static_cast<std::size_t>(std::min<std::uint64_t>(size_, kChunkBytes)));
 }
 
-FileReader::~FileReader() { std::fclose(file_); }
+FileReader::~FileReader() {
+    std::fclose(file_);
+}
 
 bool FileReader::fill(std::size_t want) {
     if (begin_ > 0) {
@@ -200,29 +208,43 @@ void ProgressTicker::finish() const {
 std::size_t scalar_size(ScalarType type) {
     switch (type) {
         case ScalarType::kInt8:
-        case ScalarType::kUInt8: return 1;
+        case ScalarType::kUInt8:
+            return 1;
         case ScalarType::kInt16:
-        case ScalarType::kUInt16: return 2;
+        case ScalarType::kUInt16:
+            return 2;
         case ScalarType::kInt32:
         case ScalarType::kUInt32:
-        case ScalarType::kFloat32: return 4;
-        case ScalarType::kFloat64: return 8;
+        case ScalarType::kFloat32:
+            return 4;
+        case ScalarType::kFloat64:
+            return 8;
     }
     return 0;
 }
 
-bool is_integer(ScalarType type) { return type != ScalarType::kFloat32 && type != ScalarType::kFloat64; }
+bool is_integer(ScalarType type) {
+    return type != ScalarType::kFloat32 && type != ScalarType::kFloat64;
+}
 
 double decode_scalar(const unsigned char* p, ScalarType type, bool big_endian) {
     switch (type) {
-        case ScalarType::kInt8: return static_cast<std::int8_t>(p[0]);
-        case ScalarType::kUInt8: return p[0];
-        case ScalarType::kInt16: return load_scalar<std::int16_t>(p, big_endian);
-        case ScalarType::kUInt16: return load_scalar<std::uint16_t>(p, big_endian);
-        case ScalarType::kInt32: return load_scalar<std::int32_t>(p, big_endian);
-        case ScalarType::kUInt32: return load_scalar<std::uint32_t>(p, big_endian);
-        case ScalarType::kFloat32: return load_scalar<float>(p, big_endian);
-        case ScalarType::kFloat64: return load_scalar<double>(p, big_endian);
+        case ScalarType::kInt8:
+            return static_cast<std::int8_t>(p[0]);
+        case ScalarType::kUInt8:
+            return p[0];
+        case ScalarType::kInt16:
+            return load_scalar<std::int16_t>(p, big_endian);
+        case ScalarType::kUInt16:
+            return load_scalar<std::uint16_t>(p, big_endian);
+        case ScalarType::kInt32:
+            return load_scalar<std::int32_t>(p, big_endian);
+        case ScalarType::kUInt32:
+            return load_scalar<std::uint32_t>(p, big_endian);
+        case ScalarType::kFloat32:
+            return load_scalar<float>(p, big_endian);
+        case ScalarType::kFloat64:
+            return load_scalar<double>(p, big_endian);
     }
     return 0.0;
 }
@@ -243,8 +265,7 @@ SceneBuilder::SceneBuilder(const std::string& path, std::uint64_t records, int s
     if (records > std::numeric_limits<std::size_t>::max() / (sizeof(float) * kMaxFields + 3 * sizeof(double)))
         fail(path, std::to_string(records) + " records are too many to hold", "");
     if (records > options.max_records)
-        fail(path,
-             std::to_string(records) + " records exceed the limit of " + std::to_string(options.max_records),
+        fail(path, std::to_string(records) + " records exceed the limit of " + std::to_string(options.max_records),
              "LoadOptions::max_records");
     scene_.sh_degree = sh_degree;
     scene_.resize(static_cast<std::size_t>(records));

@@ -150,7 +150,9 @@ inline constexpr int kFieldScale = 3;    ///< 3 scales (log or linear, see Encod
 inline constexpr int kFieldOpacity = 6;  ///< logit or linear, see Encoding
 inline constexpr int kFieldRot = 7;      ///< w, x, y, z, not necessarily normalised
 inline constexpr int kFieldSh = 11;      ///< [coefficient][rgb], coefficient 0 = f_dc
-constexpr int field_count(int sh_degree) { return kFieldSh + 3 * sh_coefficient_count(sh_degree); }
+constexpr int field_count(int sh_degree) {
+    return kFieldSh + 3 * sh_coefficient_count(sh_degree);
+}
 inline constexpr int kMaxFields = field_count(kMaxShDegree);
 
 /// How a format stores the fields that need an activation.

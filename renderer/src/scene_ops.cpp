@@ -98,8 +98,7 @@ std::uint32_t spread_bits(std::uint32_t v) {
 template <typename V>
 void permute(V& values, const std::vector<std::size_t>& order, std::size_t stride) {
     V out(values.size());
-    for (std::size_t j = 0; j < order.size(); ++j)
-        std::copy_n(&values[stride * order[j]], stride, &out[stride * j]);
+    for (std::size_t j = 0; j < order.size(); ++j) std::copy_n(&values[stride * order[j]], stride, &out[stride * j]);
     values.swap(out);
 }
 

@@ -46,7 +46,7 @@ std::string format_double(double value) {
 
 constexpr std::size_t kPoseFields = 8;
 constexpr std::size_t kFullFields = 14;
-constexpr std::array<const char*, kFullFields> kFieldNames{"timestamp", "px", "py", "pz", "qw", "qx", "qy",
+constexpr std::array<const char*, kFullFields> kFieldNames{"timestamp", "px", "py", "pz", "qw", "qx",    "qy",
                                                            "qz",        "fx", "fy", "cx", "cy", "width", "height"};
 
 std::vector<std::string> split_fields(const std::string& line) {
@@ -111,7 +111,8 @@ std::vector<Camera> read_cameras_json(const std::string& path) {
         };
         const auto size = [&](const char* name) {
             const nlohmann::json& value = field(name);
-            if (!value.is_number_integer()) throw Error(where + ": field '" + std::string(name) + "' must be an integer");
+            if (!value.is_number_integer())
+                throw Error(where + ": field '" + std::string(name) + "' must be an integer");
             const auto v = value.get<std::int64_t>();
             if (v <= 0 || v > INT_MAX) throw Error(where + ": field '" + std::string(name) + "' must be positive");
             return static_cast<int>(v);
@@ -142,7 +143,8 @@ std::vector<Camera> read_cameras_json(const std::string& path) {
 
         const nlohmann::json& rotation = field("rotation");
         if (!rotation.is_array() || rotation.size() != 3 ||
-            !std::all_of(rotation.begin(), rotation.end(), [](const auto& row) { return row.is_array() && row.size() == 3; }))
+            !std::all_of(rotation.begin(), rotation.end(),
+                         [](const auto& row) { return row.is_array() && row.size() == 3; }))
             throw Error(where + ": field 'rotation' must be a 3x3 array of numbers");
         M3 camera_to_world;
         for (int r = 0; r < 3; ++r)
@@ -156,7 +158,8 @@ std::vector<Camera> read_cameras_json(const std::string& path) {
         if (determinant(camera_to_world) < 0)
             throw Error(where + ": field 'rotation' is a reflection (determinant -1), not a rotation");
         // Through the quaternion: the stored digits leave up to 1e-3 of skew, the pose gets none.
-        camera.pose = pose_from_quaternion(centre, camera_to_world_quaternion(pose_from_centre(centre, camera_to_world)));
+        camera.pose =
+            pose_from_quaternion(centre, camera_to_world_quaternion(pose_from_centre(centre, camera_to_world)));
         cameras.push_back(std::move(camera));
     }
     return cameras;
@@ -172,8 +175,10 @@ std::vector<Camera> read_trajectory(const std::string& path, const Intrinsics& d
         if (fields.empty()) continue;
         const std::string where = path + ":" + std::to_string(line_number);
         if (fields.size() != kPoseFields && fields.size() != kFullFields)
-            throw Error(where + ": expected 8 fields (timestamp px py pz qw qx qy qz) or 14 (with fx fy cx cy width "
-                                "height), found " + std::to_string(fields.size()));
+            throw Error(where +
+                        ": expected 8 fields (timestamp px py pz qw qx qy qz) or 14 (with fx fy cx cy width "
+                        "height), found " +
+                        std::to_string(fields.size()));
         std::array<double, kFullFields> v{};
         for (std::size_t i = 0; i < fields.size(); ++i) v[i] = parse_field(where, i, fields[i]);
 
@@ -184,8 +189,8 @@ std::vector<Camera> read_trajectory(const std::string& path, const Intrinsics& d
             throw Error(where + ": quaternion (qw qx qy qz) has zero or non-finite norm");
         camera.pose = pose_from_quaternion({v[1], v[2], v[3]}, {v[4], v[5], v[6], v[7]});
         if (fields.size() == kFullFields) {
-            camera.intrinsics = {v[8], v[9], v[10], v[11], image_size(where, "width", v[12]),
-                                 image_size(where, "height", v[13])};
+            camera.intrinsics = {
+                v[8], v[9], v[10], v[11], image_size(where, "width", v[12]), image_size(where, "height", v[13])};
             validate(camera.intrinsics, where);
         } else {
             camera.intrinsics = defaults;
@@ -202,7 +207,8 @@ void write_trajectory(const std::vector<Camera>& cameras, const std::string& pat
     std::ofstream out(path, std::ios::binary | std::ios::trunc);
     if (!out) throw Error(path + ": cannot open for writing");
     out << "# timestamp px py pz qw qx qy qz fx fy cx cy width height\n"
-           "# camera centre in world coordinates, camera-to-world quaternion, COLMAP axes (+x right, +y down, +z forward)\n";
+           "# camera centre in world coordinates, camera-to-world quaternion, COLMAP axes (+x right, +y down, +z "
+           "forward)\n";
     for (const Camera& camera : cameras) {
         const V3 c = camera_centre(camera.pose);
         const std::array<double, 4> q = camera_to_world_quaternion(camera.pose);

@@ -22,7 +22,9 @@ namespace {
 using detail::orthonormality_error;
 using detail::V3;
 
-double radians(double degrees) { return degrees * kPi / 180.0; }
+double radians(double degrees) {
+    return degrees * kPi / 180.0;
+}
 
 // Generated poses are orthonormal to rounding; anything worse is a bug.
 constexpr double kGeneratedTolerance = 1e-9;
@@ -38,7 +40,7 @@ constexpr std::uint64_t kMaxFrames = 1'000'000;
 
 struct Flight {
     std::string kind;
-    double speed = 8.0;      ///< m/s
+    double speed = 8.0;  ///< m/s
     double fps = 30.0;
     double altitude = 80.0;  ///< m above the bounds' bottom along up
     double pitch = -45.0;    ///< degrees, negative looks down
@@ -56,21 +58,27 @@ Flight parse_flight(const std::string& spec) {
         for (const char* kind : kKinds) available += (available.empty() ? "" : ", ") + std::string(kind);
         throw Error(spec + ": unknown trajectory kind '" + f.kind + "' (available: " + available + ")");
     }
-    const auto params =
-        detail::builtin_params(spec, {"speed", "fps", "altitude", "pitch", "frames", "up", "seed"});
+    const auto params = detail::builtin_params(spec, {"speed", "fps", "altitude", "pitch", "frames", "up", "seed"});
     for (const auto& [key, value] : params) {
         if (key == "frames" || key == "seed") {
             (key == "frames" ? f.frames : f.seed) = detail::spec_integer(spec, key, value);
         } else if (key == "up") {
-            if (value == "z") f.up = {0, 0, 1};
-            else if (value == "y") f.up = {0, 1, 0};
-            else if (value == "-y") f.up = {0, -1, 0};
-            else throw Error(spec + ": up '" + value + "' must be z, y or -y");
+            if (value == "z")
+                f.up = {0, 0, 1};
+            else if (value == "y")
+                f.up = {0, 1, 0};
+            else if (value == "-y")
+                f.up = {0, -1, 0};
+            else
+                throw Error(spec + ": up '" + value + "' must be z, y or -y");
         } else {
             const double number = detail::spec_number(spec, key, value);
-            if (key == "speed") f.speed = number;
-            else if (key == "fps") f.fps = number;
-            else if (key == "altitude") f.altitude = number;
+            if (key == "speed")
+                f.speed = number;
+            else if (key == "fps")
+                f.fps = number;
+            else if (key == "altitude")
+                f.altitude = number;
             else {
                 f.pitch = number;
                 f.pitch_given = true;
@@ -132,8 +140,8 @@ Pose flight_pose(const V3& eye, const V3& heading, double pitch_radians, const V
     const V3 right = cross(heading, up);
     const V3 forward = std::cos(pitch_radians) * heading + std::sin(pitch_radians) * up;
     const V3 down = cross(forward, right);
-    return pose_from_centre(eye, {right[0], down[0], forward[0], right[1], down[1], forward[1], right[2], down[2],
-                                  forward[2]});
+    return pose_from_centre(
+        eye, {right[0], down[0], forward[0], right[1], down[1], forward[1], right[2], down[2], forward[2]});
 }
 
 // A point of the flight: horizontal offsets (a, b) from the centre and heading angle psi
@@ -224,7 +232,7 @@ constexpr double kLegMinSeconds = 4, kLegMaxSeconds = 10;
 constexpr double kMinTurnDegrees = 30, kMaxTurnDegrees = 90;
 constexpr double kMinSpeedFactor = 0.5, kMaxSpeedFactor = 1.5;
 constexpr double kSpeedChangePerSecond = 0.25;  // of the nominal speed: gentle acceleration
-constexpr double kSettleDegrees = 20;  // turns ease in over their last 20 degrees
+constexpr double kSettleDegrees = 20;           // turns ease in over their last 20 degrees
 constexpr double kTurnRadiusFraction = 0.1;
 constexpr double kInnerFraction = 0.5;
 constexpr double kReturnSpreadDegrees = 30;
@@ -267,7 +275,8 @@ std::vector<Waypoint> flythrough(const Flight& f, const Site& site) {
         }
         // Per axis: heading for the nearer edge while already past the inner box on that axis.
         const auto outward = [&](double heading) {
-            return (std::abs(a) > inner1 && a * std::cos(heading) > 0) || (std::abs(b) > inner2 && b * std::sin(heading) > 0);
+            return (std::abs(a) > inner1 && a * std::cos(heading) > 0) ||
+                   (std::abs(b) > inner2 && b * std::sin(heading) > 0);
         };
         if (outward(target_psi)) {
             const double home = std::atan2(-b, -a);
@@ -301,15 +310,16 @@ std::vector<Waypoint> flythrough(const Flight& f, const Site& site) {
 
 // Sub-centimetre sway (two sinusoids per axis of kHoverSway each: under 7 mm in all) and a
 // slow yaw drift, as a hovering drone's gimbal shows.
-constexpr double kHoverSway = 0.002;               // m
+constexpr double kHoverSway = 0.002;  // m
 constexpr double kMinSwayHz = 0.2, kMaxSwayHz = 0.8;
-constexpr double kHoverYawDriftDegrees = 0.2;      // per second
+constexpr double kHoverYawDriftDegrees = 0.2;  // per second
 
 std::vector<Waypoint> hover(const Flight& f) {
     Random random(f.seed);
     std::array<std::array<double, 4>, 2> sway;  // per axis a, b: two frequencies, two phases
-    for (auto& axis : sway) axis = {random.uniform(kMinSwayHz, kMaxSwayHz), random.uniform(kMinSwayHz, kMaxSwayHz),
-                                    random.uniform(0, 2 * kPi), random.uniform(0, 2 * kPi)};
+    for (auto& axis : sway)
+        axis = {random.uniform(kMinSwayHz, kMaxSwayHz), random.uniform(kMinSwayHz, kMaxSwayHz),
+                random.uniform(0, 2 * kPi), random.uniform(0, 2 * kPi)};
     const double psi0 = random.uniform(-kPi, kPi);
     const double drift = radians(kHoverYawDriftDegrees) * random.sign();
     std::vector<Waypoint> path;
@@ -348,7 +358,8 @@ std::vector<Camera> make_trajectory(const std::string& spec, const Bounds& bound
         camera.pose = flight_pose(site.at(w.a, w.b, f.altitude), site.horizontal(std::cos(w.psi), std::sin(w.psi)),
                                   w.pitch, site.up);
         if (!is_finite(camera.pose) || orthonormality_error(camera.pose.rotation) > kGeneratedTolerance)
-            throw Error(spec + ": camera " + std::to_string(i) + " is not a finite rigid pose (scene bounds too large?)");
+            throw Error(spec + ": camera " + std::to_string(i) +
+                        " is not a finite rigid pose (scene bounds too large?)");
         cameras.push_back(std::move(camera));
     }
     return cameras;

@@ -79,12 +79,15 @@ using Config = catgs::cli::SweepEntry;
 constexpr std::size_t kRenderStages = catgs::kStageCount - 1;
 static_assert(catgs::kStages[kRenderStages] == catgs::Stage::encode);
 
-std::string stage_key(catgs::Stage stage) { return std::string(catgs::stage_name(stage)) + "_ms"; }
+std::string stage_key(catgs::Stage stage) {
+    return std::string(catgs::stage_name(stage)) + "_ms";
+}
 
 struct Result {
     std::string name, pipeline;
     std::array<Series, kRenderStages> stages;
-    Series total, pairs, visible, chunks_culled, arena, key_total, cached_total, window, splits, psnr, max_abs, over_one;
+    Series total, pairs, visible, chunks_culled, arena, key_total, cached_total, window, splits, psnr, max_abs,
+        over_one;
     std::uint64_t chunks = 0;
     nlohmann::json frames = nlohmann::json::array();
 };
@@ -120,10 +123,19 @@ Result run_config(catgs::Renderer& renderer, const std::vector<catgs::Camera>& c
         r.window.values.push_back(s.window);
         r.splits.values.push_back(static_cast<double>(s.split_tasks));
         (s.key_frame ? r.key_total : r.cached_total).values.push_back(s.total_ms);
-        nlohmann::json frame{{"frame", f},           {"key_frame", s.key_frame}, {"order_reused", s.order_reused}, {"window", s.window},
-                             {"pairs", s.pairs},     {"visible", s.visible},     {"arena_bytes", s.arena_bytes},
-                             {"bands", s.bands},     {"tasks", s.tasks},         {"split_tasks", s.split_tasks},
-                             {"split_k", s.split_k},  {"chunks", s.chunks},      {"chunks_culled", s.chunks_culled}};
+        nlohmann::json frame{{"frame", f},
+                             {"key_frame", s.key_frame},
+                             {"order_reused", s.order_reused},
+                             {"window", s.window},
+                             {"pairs", s.pairs},
+                             {"visible", s.visible},
+                             {"arena_bytes", s.arena_bytes},
+                             {"bands", s.bands},
+                             {"tasks", s.tasks},
+                             {"split_tasks", s.split_tasks},
+                             {"split_k", s.split_k},
+                             {"chunks", s.chunks},
+                             {"chunks_culled", s.chunks_culled}};
         for (std::size_t k = 0; k < kRenderStages; ++k) frame[stage_key(catgs::kStages[k])] = s.stage_ms.ms[k];
         frame["total_ms"] = s.total_ms;
         // The bench kit (shared/bench-kit/summarize.py) reads the copy-out time by its old name.
@@ -151,13 +163,14 @@ nlohmann::json stats_json(const Series& s) {
 }
 
 void print_detail(const Result& r) {
-    std::printf("\n== %s (%s)\n%-13s %10s %10s %10s\n", r.name.c_str(), r.pipeline.c_str(), "stage (ms)", "median", "p90",
-                "max");
+    std::printf("\n== %s (%s)\n%-13s %10s %10s %10s\n", r.name.c_str(), r.pipeline.c_str(), "stage (ms)", "median",
+                "p90", "max");
     auto row = [](const char* name, const Series& s, double scale, const char* format) {
         std::printf(format, name, s.percentile(0.5) * scale, s.percentile(0.9) * scale, s.max() * scale);
     };
     for (std::size_t k = 0; k < kRenderStages; ++k)
-        row(std::string(catgs::stage_name(catgs::kStages[k])).c_str(), r.stages[k], 1.0, "%-13s %10.3f %10.3f %10.3f\n");
+        row(std::string(catgs::stage_name(catgs::kStages[k])).c_str(), r.stages[k], 1.0,
+            "%-13s %10.3f %10.3f %10.3f\n");
     row("total", r.total, 1.0, "%-13s %10.3f %10.3f %10.3f\n");
     row("key total", r.key_total, 1.0, "%-13s %10.3f %10.3f %10.3f\n");
     row("cached total", r.cached_total, 1.0, "%-13s %10.3f %10.3f %10.3f\n");
@@ -197,7 +210,8 @@ std::vector<catgs::ImageRGB8> render_references(const Options& o, const std::sha
     for (std::size_t f = 0; f < cameras.size(); f += static_cast<std::size_t>(o.error_every)) {
         references.emplace_back();
         ref->render_rgb8(cameras[f], ro, references.back());
-        if (!o.quiet) std::fprintf(stderr, "reference (%s, %s): frame %zu\n", ref->name().c_str(), o.reference.c_str(), f);
+        if (!o.quiet)
+            std::fprintf(stderr, "reference (%s, %s): frame %zu\n", ref->name().c_str(), o.reference.c_str(), f);
     }
     return references;
 }
@@ -228,8 +242,8 @@ nlohmann::json result_json(const Result& r) {
 
 // One row per configuration on stdout and in --csv-out.
 void print_summary(const Options& o, const std::vector<Result>& results) {
-    std::printf("\n%-22s %9s %9s %9s %9s %9s %10s %8s %8s %6s %5s\n", "configuration", "median", "p90", "max", "key med",
-                "cach med", "pairs med", "PSNR", "worst", "max", "W med");
+    std::printf("\n%-22s %9s %9s %9s %9s %9s %10s %8s %8s %6s %5s\n", "configuration", "median", "p90", "max",
+                "key med", "cach med", "pairs med", "PSNR", "worst", "max", "W med");
     std::ofstream csv;
     if (!o.csv_out.empty()) {
         csv.open(o.csv_out);
@@ -244,11 +258,11 @@ void print_summary(const Options& o, const std::vector<Result>& results) {
                     r.cached_total.percentile(0.5), r.pairs.percentile(0.5), r.psnr.mean(), r.psnr.min(),
                     r.max_abs.max(), r.window.percentile(0.5));
         if (csv)
-            csv << r.name << ",\"" << r.pipeline << "\"," << total.percentile(0.5) << "," << total.percentile(0.9) << ","
-                << total.max() << "," << r.key_total.percentile(0.5) << "," << r.cached_total.percentile(0.5) << ","
-                << r.key_total.values.size() << "," << r.cached_total.values.size() << "," << r.pairs.percentile(0.5)
-                << "," << r.psnr.mean() << "," << r.psnr.min() << "," << r.max_abs.max() << "," << r.over_one.max()
-                << "," << r.window.percentile(0.5) << "\n";
+            csv << r.name << ",\"" << r.pipeline << "\"," << total.percentile(0.5) << "," << total.percentile(0.9)
+                << "," << total.max() << "," << r.key_total.percentile(0.5) << "," << r.cached_total.percentile(0.5)
+                << "," << r.key_total.values.size() << "," << r.cached_total.values.size() << ","
+                << r.pairs.percentile(0.5) << "," << r.psnr.mean() << "," << r.psnr.min() << "," << r.max_abs.max()
+                << "," << r.over_one.max() << "," << r.window.percentile(0.5) << "\n";
     }
 }
 
@@ -320,7 +334,8 @@ int main(int argc, char** argv) {
                    "render with the SH coefficients above this degree (0..3) dropped; 0: view-independent colour "
                    "(default: the scene's degree)")
         ->check(CLI::Range(0, 3));
-    app.add_option("--grid", o.grid, "replicate the scene NxM over the horizontal axes (e.g. 3x3)")->capture_default_str();
+    app.add_option("--grid", o.grid, "replicate the scene NxM over the horizontal axes (e.g. 3x3)")
+        ->capture_default_str();
     app.add_option("--up", o.up, "the scene's up axis (x, y, z, -y, ...) for --grid")->capture_default_str();
     app.add_option("--trajectory", o.trajectory, "trajectory file or builtin:survey|orbit|flythrough|hover?...")
         ->capture_default_str();
@@ -328,10 +343,11 @@ int main(int argc, char** argv) {
         ->capture_default_str();
     app.add_option("--precision", o.precision, "float or double")->capture_default_str();
     catgs::cli::add_pipeline_flags(app, o.pipeline);
-    app.add_option("--sweep", o.sweep,
-                   "configurations to compare, 'name: flags; name: flags' or @file with one 'name: flags' a line "
-                   "(flags as --split, --cache, --window, ..., applied over the defaults, so 'plain: --cache off --split off' is "
-                   "the per-frame pipeline); replaces the single configuration");
+    app.add_option(
+        "--sweep", o.sweep,
+        "configurations to compare, 'name: flags; name: flags' or @file with one 'name: flags' a line "
+        "(flags as --split, --cache, --window, ..., applied over the defaults, so 'plain: --cache off --split off' is "
+        "the per-frame pipeline); replaces the single configuration");
     app.add_option("--reference", o.reference,
                    "error reference, rendered in double without cache or split: none, exact, or opacity-aware")
         ->capture_default_str();

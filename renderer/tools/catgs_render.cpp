@@ -21,7 +21,6 @@
 
 namespace {
 
-
 struct Options {
     std::string scene = "builtin:city?gaussians=200000&seed=1";
     std::string cameras;
@@ -100,8 +99,8 @@ int run(const Options& o) {
     if (!o.cameras.empty())
         cameras = catgs::read_cameras_json(o.cameras);
     else
-        cameras = catgs::load_trajectory(o.trajectory.empty() ? "builtin:survey" : o.trajectory, scene->bounds,
-                                         intrinsics);
+        cameras =
+            catgs::load_trajectory(o.trajectory.empty() ? "builtin:survey" : o.trajectory, scene->bounds, intrinsics);
     if (o.max_frames >= 0 && cameras.size() > static_cast<std::size_t>(o.max_frames))
         cameras.resize(static_cast<std::size_t>(o.max_frames));
     if (cameras.empty()) throw catgs::Error("the camera path has no cameras");
@@ -136,9 +135,14 @@ int run(const Options& o) {
                 catgs::write_image(file, image8);
         }
         if (o.json) {
-            nlohmann::json frame{{"frame", i},           {"file", file},     {"total_ms", s.total_ms},
-                                 {"visible", s.visible},   {"pairs", s.pairs}, {"key_frame", s.key_frame},
-                                 {"window", s.window},     {"split_tasks", s.split_tasks}};
+            nlohmann::json frame{{"frame", i},
+                                 {"file", file},
+                                 {"total_ms", s.total_ms},
+                                 {"visible", s.visible},
+                                 {"pairs", s.pairs},
+                                 {"key_frame", s.key_frame},
+                                 {"window", s.window},
+                                 {"split_tasks", s.split_tasks}};
             for (catgs::Stage stage : catgs::kStages)
                 if (stage != catgs::Stage::encode)
                     frame[std::string(catgs::stage_name(stage)) + "_ms"] = s.stage_ms[stage];
@@ -185,15 +189,15 @@ int run(const Options& o) {
 int main(int argc, char** argv) {
     Options o;
     CLI::App app{"catgs-render: render a 3D Gaussian Splatting scene along a camera path"};
-    app.add_option("--scene", o.scene, "PLY or .splat file, or builtin:city?gaussians=N&seed=S")
-        ->capture_default_str();
+    app.add_option("--scene", o.scene, "PLY or .splat file, or builtin:city?gaussians=N&seed=S")->capture_default_str();
     app.add_option("--cameras", o.cameras, "graphdeco cameras.json (uses its own intrinsics)");
     app.add_option("--trajectory", o.trajectory,
                    "trajectory file, or builtin:survey|orbit|flythrough|hover?speed=&fps=&altitude=&pitch=&frames= "
                    "(default builtin:survey)");
     app.add_option("--out", o.out, "directory for one image per camera (named after img_name or the frame index)");
     app.add_option("--format", o.format, "png (8-bit) or exr (float, unclamped)")->capture_default_str();
-    app.add_option("--backend", o.backend, "cpu or cuda (" + catgs::available_backends() + " built in)")->capture_default_str();
+    app.add_option("--backend", o.backend, "cpu or cuda (" + catgs::available_backends() + " built in)")
+        ->capture_default_str();
     app.add_option("--precision", o.precision, "float or double")->capture_default_str();
     catgs::cli::add_pipeline_flags(app, o.pipeline);
     app.add_option("--background", o.background, "background colour r,g,b in [0,1]")->capture_default_str();

@@ -17,7 +17,9 @@ namespace catgs::cli {
 
 PipelineFlags::PipelineFlags(const RenderOptions& o)
     : culling(culling_name(o.culling)),
-      split(o.catgs.split_auto ? "auto" : o.catgs.split_k > 0 ? std::to_string(o.catgs.split_k) : "off"),
+      split(o.catgs.split_auto    ? "auto"
+            : o.catgs.split_k > 0 ? std::to_string(o.catgs.split_k)
+                                  : "off"),
       split_tail(o.catgs.split_tail_transmittance),
       cache(cache_mode_name(o.catgs.cache)),
       window(o.catgs.adaptive_window ? "adaptive" : std::to_string(o.catgs.window)),
@@ -144,8 +146,7 @@ std::string describe_pipeline(const RenderOptions& o) {
     const CatgsOptions& c = o.catgs;
     s += c.split_auto ? ", split auto" : (c.split_k ? ", split k=" + std::to_string(c.split_k) : ", no split");
     s += std::string(", cache ") + cache_mode_name(c.cache);
-    if (c.cache != CacheMode::off)
-        s += c.adaptive_window ? ", W adaptive" : ", W=" + std::to_string(c.window);
+    if (c.cache != CacheMode::off) s += c.adaptive_window ? ", W adaptive" : ", W=" + std::to_string(c.window);
     if (c.cache != CacheMode::off && !c.resort_cached)
         s += std::isfinite(c.reuse_order_max_angle)
                  ? ", depth order reused within " + PipelineFlags::angle_name(c.reuse_order_max_angle) + " deg"
@@ -192,8 +193,7 @@ std::vector<SweepEntry> parse_sweep(std::string text) {
         const auto first = entry.find_first_not_of(" \t\r\n");
         if (first == std::string::npos || entry[first] == '#') continue;
         const auto colon = entry.find(':');
-        if (colon == std::string::npos)
-            throw Error("--sweep entry '" + entry + "': expected 'name: flags'");
+        if (colon == std::string::npos) throw Error("--sweep entry '" + entry + "': expected 'name: flags'");
         SweepEntry c;
         c.name = entry.substr(first, colon - first);
         while (!c.name.empty() && std::isspace(static_cast<unsigned char>(c.name.back()))) c.name.pop_back();

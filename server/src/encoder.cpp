@@ -43,8 +43,8 @@ void encode_jpeg(const ImageRGB8& image, const EncodeSettings& s, std::string& o
     out.resize(capacity);
     auto* buffer = reinterpret_cast<unsigned char*>(out.data());
     unsigned long size = capacity;
-    if (tjCompress2(handle.get(), image.rgb.data(), image.width, 0, image.height, TJPF_RGB, &buffer, &size,
-                    subsampling, s.jpeg_quality, TJFLAG_NOREALLOC) != 0)
+    if (tjCompress2(handle.get(), image.rgb.data(), image.width, 0, image.height, TJPF_RGB, &buffer, &size, subsampling,
+                    s.jpeg_quality, TJFLAG_NOREALLOC) != 0)
         throw Error(std::string("jpeg encoder: ") + tjGetErrorStr2(handle.get()));
     out.resize(size);
 }
@@ -111,24 +111,27 @@ void encode_image(const ImageRGB8& image, const EncodeSettings& settings, std::s
     if (image.width <= 0 || image.height <= 0 || image.rgb.size() != expected)
         throw Error("encoder: image size does not match its width and height");
     switch (settings.format) {
-    case Format::jpeg:
-        encode_jpeg(image, settings, out);
-        return;
-    case Format::png:
-        encode_png(image, out);
-        return;
-    case Format::raw_rgb8:
-        out.assign(reinterpret_cast<const char*>(image.rgb.data()), image.rgb.size());
-        return;
+        case Format::jpeg:
+            encode_jpeg(image, settings, out);
+            return;
+        case Format::png:
+            encode_png(image, out);
+            return;
+        case Format::raw_rgb8:
+            out.assign(reinterpret_cast<const char*>(image.rgb.data()), image.rgb.size());
+            return;
     }
     throw Error("encoder: unknown format");
 }
 
 const char* format_name(Format format) {
     switch (format) {
-    case Format::jpeg: return "jpeg";
-    case Format::png: return "png";
-    case Format::raw_rgb8: return "raw";
+        case Format::jpeg:
+            return "jpeg";
+        case Format::png:
+            return "png";
+        case Format::raw_rgb8:
+            return "raw";
     }
     return "?";
 }

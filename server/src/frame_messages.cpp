@@ -4,7 +4,9 @@
 
 namespace catgs::server {
 
-double ms_between(TimePoint a, TimePoint b) { return std::chrono::duration<double, std::milli>(b - a).count(); }
+double ms_between(TimePoint a, TimePoint b) {
+    return std::chrono::duration<double, std::milli>(b - a).count();
+}
 
 std::string image_size(const Intrinsics& intrinsics) {
     return std::to_string(intrinsics.width) + "x" + std::to_string(intrinsics.height);

@@ -46,18 +46,20 @@ int main(int argc, char** argv) {
     app.add_option("--health-address", o.health_address,
                    "extra plaintext listener serving only grpc.health.v1 (for Kubernetes probes)");
     app.add_option("--scene-root", o.scene_root, "directory that SceneService.LoadScene paths are resolved in");
-    app.add_option("--scene", scenes,
-                   "scene to load at start-up, [ID=]PATH|builtin:...; repeatable (default city=" + o.preload[0].substr(5) +
-                       ")");
-    app.add_option("--backend", o.backend, "cpu or cuda (default: cuda when a device is usable, else cpu; built in: " +
-                                               catgs::available_backends() + ")");
+    app.add_option(
+        "--scene", scenes,
+        "scene to load at start-up, [ID=]PATH|builtin:...; repeatable (default city=" + o.preload[0].substr(5) + ")");
+    app.add_option(
+        "--backend", o.backend,
+        "cpu or cuda (default: cuda when a device is usable, else cpu; built in: " + catgs::available_backends() + ")");
     app.add_option("--precision", o.precision, "float or double")->capture_default_str();
     app.add_option("--render-threads", o.render_threads, "CPU backend: threads per render (0: all cores)")
         ->capture_default_str();
     app.add_option("--render-workers", o.render_workers, "sessions rendering at the same time")->capture_default_str();
     app.add_option("--encode-workers", o.encode_workers, "JPEG/PNG encoder threads")->capture_default_str();
     app.add_option("--max-sessions", o.limits.max_sessions, "concurrent sessions (per GPU)")->capture_default_str();
-    app.add_option("--max-width", o.limits.max_width, "largest image width a session may request")->capture_default_str();
+    app.add_option("--max-width", o.limits.max_width, "largest image width a session may request")
+        ->capture_default_str();
     app.add_option("--max-height", o.limits.max_height, "largest image height a session may request")
         ->capture_default_str();
     app.add_option("--max-scene-mb", max_scene_mb,
@@ -121,7 +123,8 @@ int main(int argc, char** argv) {
         if (!token_file.empty()) o.bearer_token = catgs::read_token(token_file);
         o.reflection = !no_reflection;
         if (o.limits.max_sessions < 1) throw catgs::Error("--max-sessions must be >= 1");
-        if (o.limits.max_width < 1 || o.limits.max_height < 1) throw catgs::Error("--max-width/--max-height must be >= 1");
+        if (o.limits.max_width < 1 || o.limits.max_height < 1)
+            throw catgs::Error("--max-width/--max-height must be >= 1");
         if (o.render_workers < 1 || o.encode_workers < 1)
             throw catgs::Error("--render-workers/--encode-workers must be >= 1");
         if (!o.bearer_token.empty() && o.tls_cert_file.empty())

@@ -23,7 +23,9 @@ std::string num(double v) {
     return s.str();
 }
 
-bool finite(const v1::Vec3& v) { return std::isfinite(v.x()) && std::isfinite(v.y()) && std::isfinite(v.z()); }
+bool finite(const v1::Vec3& v) {
+    return std::isfinite(v.x()) && std::isfinite(v.y()) && std::isfinite(v.z());
+}
 
 /// Quaternions shorter than this cannot be normalised reliably (and mean a client bug).
 constexpr double kMinQuaternionNorm = 1e-6;
@@ -31,8 +33,8 @@ constexpr double kMinQuaternionNorm = 1e-6;
 grpc::Status check_pose(const v1::Pose& pose, const std::string& field) {
     if (!pose.has_position()) return invalid(field + ".position", "missing");
     if (!finite(pose.position()))
-        return invalid(field + ".position", "not finite (" + num(pose.position().x()) + ", " + num(pose.position().y()) +
-                                                ", " + num(pose.position().z()) + ")");
+        return invalid(field + ".position", "not finite (" + num(pose.position().x()) + ", " +
+                                                num(pose.position().y()) + ", " + num(pose.position().z()) + ")");
     if (!pose.has_orientation()) return invalid(field + ".orientation", "missing");
     const auto& q = pose.orientation();
     if (!(std::isfinite(q.w()) && std::isfinite(q.x()) && std::isfinite(q.y()) && std::isfinite(q.z())))
@@ -48,7 +50,8 @@ grpc::Status unknown_enum_value(const std::string& field, const pb::EnumDescript
     std::string known;
     for (int i = 0; i < type.value_count(); ++i)
         known += (i ? ", " : "") + std::to_string(type.value(i)->number()) + " " + type.value(i)->name();
-    return invalid(field, "unknown value " + std::to_string(value) + " of " + type.full_name() + " (known: " + known + ")");
+    return invalid(field,
+                   "unknown value " + std::to_string(value) + " of " + type.full_name() + " (known: " + known + ")");
 }
 
 }  // namespace
@@ -84,18 +87,30 @@ RenderOptions render_options_for(const v1::PipelineOptions& p, const v1::Color* 
     // configuration at the accuracy bar, the paper's cache with split k = 8192).
     RenderOptions o = default_pipeline_options();
     switch (p.culling()) {
-    case v1::CULLING_EXACT: o.culling = Culling::exact; break;
-    case v1::CULLING_BBOX3SIGMA: o.culling = Culling::bbox3sigma; break;
-    case v1::CULLING_OPACITY_AWARE: o.culling = Culling::opacity_aware; break;
-    default: break;
+        case v1::CULLING_EXACT:
+            o.culling = Culling::exact;
+            break;
+        case v1::CULLING_BBOX3SIGMA:
+            o.culling = Culling::bbox3sigma;
+            break;
+        case v1::CULLING_OPACITY_AWARE:
+            o.culling = Culling::opacity_aware;
+            break;
+        default:
+            break;
     }
     if (background) o.background = {background->r(), background->g(), background->b()};
     if (p.near_plane() > 0) o.near_plane = p.near_plane();
     CatgsOptions& c = o.catgs;
     switch (p.cache()) {
-    case v1::CACHE_MODE_OFF: c.cache = CacheMode::off; break;
-    case v1::CACHE_MODE_SPECULATIVE: c.cache = CacheMode::speculative; break;
-    default: break;
+        case v1::CACHE_MODE_OFF:
+            c.cache = CacheMode::off;
+            break;
+        case v1::CACHE_MODE_SPECULATIVE:
+            c.cache = CacheMode::speculative;
+            break;
+        default:
+            break;
     }
     if (p.fixed_window() > 0) {
         c.adaptive_window = false;
@@ -107,16 +122,19 @@ RenderOptions render_options_for(const v1::PipelineOptions& p, const v1::Color* 
     if (p.has_reuse_depth_order()) c.resort_cached = !p.reuse_depth_order();
     if (p.has_reuse_order_max_degrees()) c.reuse_order_max_angle = p.reuse_order_max_degrees() * kPi / 180.0;
     switch (p.split()) {
-    case v1::SPLIT_MODE_OFF:
-        c.split_auto = false;
-        c.split_k = 0;
-        break;
-    case v1::SPLIT_MODE_AUTO: c.split_auto = true; break;
-    case v1::SPLIT_MODE_FIXED:
-        c.split_auto = false;
-        c.split_k = p.split_k();
-        break;
-    default: break;
+        case v1::SPLIT_MODE_OFF:
+            c.split_auto = false;
+            c.split_k = 0;
+            break;
+        case v1::SPLIT_MODE_AUTO:
+            c.split_auto = true;
+            break;
+        case v1::SPLIT_MODE_FIXED:
+            c.split_auto = false;
+            c.split_k = p.split_k();
+            break;
+        default:
+            break;
     }
     return o;
 }
@@ -140,8 +158,10 @@ grpc::Status parse_session_config(const v1::SessionConfig& config, const Limits&
     if (config.has_intrinsics()) {
         const auto& in = config.intrinsics();
         const std::string i = f + "intrinsics.";
-        if (!(std::isfinite(in.fx()) && in.fx() > 0)) return invalid(i + "fx", num(in.fx()) + " is not a positive focal length");
-        if (!(std::isfinite(in.fy()) && in.fy() > 0)) return invalid(i + "fy", num(in.fy()) + " is not a positive focal length");
+        if (!(std::isfinite(in.fx()) && in.fx() > 0))
+            return invalid(i + "fx", num(in.fx()) + " is not a positive focal length");
+        if (!(std::isfinite(in.fy()) && in.fy() > 0))
+            return invalid(i + "fy", num(in.fy()) + " is not a positive focal length");
         if (!(std::isfinite(in.cx()) && in.cx() >= 0 && in.cx() <= width))
             return invalid(i + "cx", "principal point " + num(in.cx()) + " is outside the image width 0.." +
                                          std::to_string(width));
@@ -150,8 +170,8 @@ grpc::Status parse_session_config(const v1::SessionConfig& config, const Limits&
                                          std::to_string(height));
         k = Intrinsics{in.fx(), in.fy(), in.cx(), in.cy(), width, height};
     } else {
-        const double fov = config.horizontal_fov_degrees() == 0 ? kDefaultHorizontalFovDegrees
-                                                                : config.horizontal_fov_degrees();
+        const double fov =
+            config.horizontal_fov_degrees() == 0 ? kDefaultHorizontalFovDegrees : config.horizontal_fov_degrees();
         if (!(std::isfinite(fov) && fov > 0 && fov < 180))
             return invalid(f + "horizontal_fov_degrees", num(fov) + " is outside (0, 180)");
         k = intrinsics_from_fov(width, height, fov);
@@ -164,14 +184,23 @@ grpc::Status parse_session_config(const v1::SessionConfig& config, const Limits&
     EncodeSettings e;
     const auto& enc = config.encoding();
     switch (enc.encoding()) {
-    case v1::ENCODING_UNSPECIFIED:
-    case v1::ENCODING_JPEG: e.format = Format::jpeg; break;
-    case v1::ENCODING_PNG: e.format = Format::png; break;
-    case v1::ENCODING_RAW_RGB8: e.format = Format::raw_rgb8; break;
-    default: return invalid(f + "encoding.encoding", "unknown value " + std::to_string(enc.encoding()));  // not reached: checked above
+        case v1::ENCODING_UNSPECIFIED:
+        case v1::ENCODING_JPEG:
+            e.format = Format::jpeg;
+            break;
+        case v1::ENCODING_PNG:
+            e.format = Format::png;
+            break;
+        case v1::ENCODING_RAW_RGB8:
+            e.format = Format::raw_rgb8;
+            break;
+        default:
+            return invalid(f + "encoding.encoding",
+                           "unknown value " + std::to_string(enc.encoding()));  // not reached: checked above
     }
     if (enc.jpeg_quality() < 0 || enc.jpeg_quality() > 100)
-        return invalid(f + "encoding.jpeg_quality", std::to_string(enc.jpeg_quality()) + " is outside 1..100 (0: default)");
+        return invalid(f + "encoding.jpeg_quality",
+                       std::to_string(enc.jpeg_quality()) + " is outside 1..100 (0: default)");
     e.jpeg_quality = enc.jpeg_quality() == 0 ? kDefaultJpegQuality : enc.jpeg_quality();
     e.jpeg_444 = enc.jpeg_subsampling() == v1::CHROMA_SUBSAMPLING_444;
 
@@ -259,9 +288,12 @@ grpc::Status parse_frame_request(const v1::FrameRequest& request, const Intrinsi
 
 v1::Encoding to_proto(Format format) {
     switch (format) {
-    case Format::jpeg: return v1::ENCODING_JPEG;
-    case Format::png: return v1::ENCODING_PNG;
-    case Format::raw_rgb8: return v1::ENCODING_RAW_RGB8;
+        case Format::jpeg:
+            return v1::ENCODING_JPEG;
+        case Format::png:
+            return v1::ENCODING_PNG;
+        case Format::raw_rgb8:
+            return v1::ENCODING_RAW_RGB8;
     }
     return v1::ENCODING_UNSPECIFIED;
 }

@@ -32,7 +32,9 @@ SceneSummary summarize(const std::string& id, const std::string& source, const S
     return s;
 }
 
-bool is_builtin(const std::string& source) { return source.rfind("builtin:", 0) == 0; }
+bool is_builtin(const std::string& source) {
+    return source.rfind("builtin:", 0) == 0;
+}
 
 }  // namespace
 
@@ -192,10 +194,10 @@ grpc::Status SceneRegistry::load(const std::string& requested_id, const std::str
     std::lock_guard lock(state_->mutex);
     if (grpc::Status taken = id_taken_locked(id); !taken.ok()) return taken;
     if (max_scene_bytes_ > 0 && state_->bytes + summary.host_bytes > max_scene_bytes_)
-        return {grpc::StatusCode::RESOURCE_EXHAUSTED,
-                "max-scene-bytes: scene '" + source + "' needs " + std::to_string(summary.host_bytes) +
-                    " bytes; the limit is " + std::to_string(max_scene_bytes_) + " (" + std::to_string(state_->bytes) +
-                    " in use)"};
+        return {grpc::StatusCode::RESOURCE_EXHAUSTED, "max-scene-bytes: scene '" + source + "' needs " +
+                                                          std::to_string(summary.host_bytes) + " bytes; the limit is " +
+                                                          std::to_string(max_scene_bytes_) + " (" +
+                                                          std::to_string(state_->bytes) + " in use)"};
     state_->bytes += summary.host_bytes;
     state_->scenes.emplace(id, Lease::State::Entry{std::move(scene), summary});
     spdlog::info("scene {} loaded from {}: {} Gaussians, SH degree {}, {:.1f} MB", id, source, summary.gaussians,
@@ -259,7 +261,8 @@ grpc::Status SceneRegistry::id_taken_locked(const std::string& id) const {
     if (it == state_->scenes.end()) return grpc::Status::OK;
     if (it->second.summary.unloading)
         return {grpc::StatusCode::ALREADY_EXISTS,
-                "scene_id '" + id + "' is still unloading (freed when its " + std::to_string(it->second.summary.sessions) +
+                "scene_id '" + id + "' is still unloading (freed when its " +
+                    std::to_string(it->second.summary.sessions) +
                     " session(s) close); load it again after that or under another id"};
     return {grpc::StatusCode::ALREADY_EXISTS, "scene_id '" + id + "' is already loaded"};
 }

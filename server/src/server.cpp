@@ -23,13 +23,15 @@ namespace {
 std::shared_ptr<grpc::ServerCredentials> credentials(const ServerOptions& o) {
     if (o.tls_cert_file.empty() && o.tls_key_file.empty()) {
         if (!o.tls_client_ca_file.empty())
-            throw Error("--tls-client-ca needs --tls-cert and --tls-key: client certificates are only checked over TLS");
+            throw Error(
+                "--tls-client-ca needs --tls-cert and --tls-key: client certificates are only checked over TLS");
         return grpc::InsecureServerCredentials();
     }
     if (o.tls_cert_file.empty() || o.tls_key_file.empty())
         throw Error("--tls-cert and --tls-key: give both or neither");
     grpc::SslServerCredentialsOptions ssl;
-    ssl.pem_key_cert_pairs.push_back({read_file(o.tls_key_file, "--tls-key"), read_file(o.tls_cert_file, "--tls-cert")});
+    ssl.pem_key_cert_pairs.push_back(
+        {read_file(o.tls_key_file, "--tls-key"), read_file(o.tls_cert_file, "--tls-cert")});
     if (!o.tls_client_ca_file.empty()) {
         // mTLS: clients must present a certificate signed by this CA.
         ssl.pem_root_certs = read_file(o.tls_client_ca_file, "--tls-client-ca");
@@ -158,9 +160,10 @@ void Server::start() {
             throw Error("--health-address '" + o.health_address + "': cannot listen there");
         set_health(health_server_.get(), true);
     }
-    spdlog::info("catgs-server listening on port {} ({}, backend {}, {} render workers, {} encoders, max {} sessions){}",
-                 port_, o.tls_cert_file.empty() ? "plaintext" : "TLS", o.backend, o.render_workers, o.encode_workers,
-                 o.limits.max_sessions, health_port_ ? ", health on port " + std::to_string(health_port_) : "");
+    spdlog::info(
+        "catgs-server listening on port {} ({}, backend {}, {} render workers, {} encoders, max {} sessions){}", port_,
+        o.tls_cert_file.empty() ? "plaintext" : "TLS", o.backend, o.render_workers, o.encode_workers,
+        o.limits.max_sessions, health_port_ ? ", health on port " + std::to_string(health_port_) : "");
 }
 
 void Server::begin_shutdown() {

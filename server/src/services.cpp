@@ -98,8 +98,10 @@ grpc::ServerUnaryReactor* RenderServiceImpl::Render(grpc::CallbackServerContext*
             serialize_message(out, response);
             reactor->Finish(grpc::Status::OK);
         });
-        if (!encoding) reactor->Finish(shutting_down_status());
-        else core.counters().frames_sent++;
+        if (!encoding)
+            reactor->Finish(shutting_down_status());
+        else
+            core.counters().frames_sent++;
     });
     if (!posted) reactor->Finish(shutting_down_status());
     return reactor;
@@ -126,7 +128,8 @@ void SceneServiceImpl::fill(const SceneSummary& s, v1::SceneInfo* info) const {
 }
 
 grpc::ServerUnaryReactor* SceneServiceImpl::LoadScene(grpc::CallbackServerContext* context,
-                                                      const grpc::ByteBuffer* request_bytes, grpc::ByteBuffer* response) {
+                                                      const grpc::ByteBuffer* request_bytes,
+                                                      grpc::ByteBuffer* response) {
     if (grpc::Status auth = core_.authorize(context); !auth.ok()) return finish_now(context, auth);
     auto request = std::make_shared<v1::LoadSceneRequest>();
     if (grpc::Status parsed = parse_request(*request_bytes, request.get()); !parsed.ok())
@@ -153,7 +156,8 @@ grpc::ServerUnaryReactor* SceneServiceImpl::LoadScene(grpc::CallbackServerContex
 }
 
 grpc::ServerUnaryReactor* SceneServiceImpl::ListScenes(grpc::CallbackServerContext* context,
-                                                       const grpc::ByteBuffer* request_bytes, grpc::ByteBuffer* response) {
+                                                       const grpc::ByteBuffer* request_bytes,
+                                                       grpc::ByteBuffer* response) {
     if (grpc::Status auth = core_.authorize(context); !auth.ok()) return finish_now(context, auth);
     v1::ListScenesRequest request;
     if (grpc::Status parsed = parse_request(*request_bytes, &request); !parsed.ok()) return finish_now(context, parsed);
@@ -164,7 +168,8 @@ grpc::ServerUnaryReactor* SceneServiceImpl::ListScenes(grpc::CallbackServerConte
 }
 
 grpc::ServerUnaryReactor* SceneServiceImpl::UnloadScene(grpc::CallbackServerContext* context,
-                                                        const grpc::ByteBuffer* request_bytes, grpc::ByteBuffer* response) {
+                                                        const grpc::ByteBuffer* request_bytes,
+                                                        grpc::ByteBuffer* response) {
     if (grpc::Status auth = core_.authorize(context); !auth.ok()) return finish_now(context, auth);
     v1::UnloadSceneRequest request;
     if (grpc::Status parsed = parse_request(*request_bytes, &request); !parsed.ok()) return finish_now(context, parsed);
@@ -181,7 +186,8 @@ grpc::ServerUnaryReactor* SceneServiceImpl::UnloadScene(grpc::CallbackServerCont
 }
 
 grpc::ServerUnaryReactor* SceneServiceImpl::GetScene(grpc::CallbackServerContext* context,
-                                                     const grpc::ByteBuffer* request_bytes, grpc::ByteBuffer* response) {
+                                                     const grpc::ByteBuffer* request_bytes,
+                                                     grpc::ByteBuffer* response) {
     if (grpc::Status auth = core_.authorize(context); !auth.ok()) return finish_now(context, auth);
     v1::GetSceneRequest request;
     if (grpc::Status parsed = parse_request(*request_bytes, &request); !parsed.ok()) return finish_now(context, parsed);

@@ -19,23 +19,31 @@ constexpr std::size_t kMaxQueuedErrorFrames = 8;
 
 const char* kind_name(const v1::StreamRequest& r) {
     switch (r.kind_case()) {
-    case v1::StreamRequest::kOpen: return "open";
-    case v1::StreamRequest::kFrame: return "frame";
-    default: return "nothing";
+        case v1::StreamRequest::kOpen:
+            return "open";
+        case v1::StreamRequest::kFrame:
+            return "frame";
+        default:
+            return "nothing";
     }
 }
 
 }  // namespace
 
 StreamSession::StreamSession(ServerCore& core, grpc::CallbackServerContext* context)
-    : core_(core), context_(context), id_(core.counters().next_session_id++), started_(Clock::now()),
-      peer_(context->peer()), pose_rate_(core.options().limits.max_pose_rate, started_) {
+    : core_(core),
+      context_(context),
+      id_(core.counters().next_session_id++),
+      started_(Clock::now()),
+      peer_(context->peer()),
+      pose_rate_(core.options().limits.max_pose_rate, started_) {
     // The proxy's affinity key (deploy/envoy*.yaml), logged so that an operator can follow a
     // reconnecting viewer across sessions. gRPC admits only printable ASCII in header values;
     // the length is bounded here.
     const auto& metadata = context->client_metadata();
     if (auto it = metadata.find("x-catgs-session"); it != metadata.end())
-        peer_ += " (x-catgs-session " + std::string(it->second.data(), std::min<std::size_t>(it->second.size(), 128)) + ")";
+        peer_ +=
+            " (x-catgs-session " + std::string(it->second.data(), std::min<std::size_t>(it->second.size(), 128)) + ")";
 }
 
 StreamSession::~StreamSession() {
@@ -93,9 +101,11 @@ void StreamSession::OnReadDone(bool ok) {
                 request_finish_locked(malformed_request("StreamRequest", request_buffer_));
             } else if (phase_ == Phase::awaiting_open) {
                 if (!request_.has_open())
-                    request_finish_locked({grpc::StatusCode::INVALID_ARGUMENT,
-                                           std::string("open: the first message of a stream must be StreamRequest.open, "
-                                                       "got ") + kind_name(request_)});
+                    request_finish_locked(
+                        {grpc::StatusCode::INVALID_ARGUMENT,
+                         std::string("open: the first message of a stream must be StreamRequest.open, "
+                                     "got ") +
+                             kind_name(request_)});
                 else if (grpc::Status fields = check_enum_values(request_, ""); !fields.ok())
                     request_finish_locked(fields);
                 else
@@ -105,9 +115,10 @@ void StreamSession::OnReadDone(bool ok) {
                     handle_frame(request_.frame(), check_enum_values(request_, ""));
                 } else {
                     ++stats_.requests_received;
-                    error_frame_locked(0, {grpc::StatusCode::INVALID_ARGUMENT,
-                                           request_.has_open() ? "open: the session is already open; send frame requests"
-                                                               : "kind: empty StreamRequest (set open or frame)"});
+                    error_frame_locked(0,
+                                       {grpc::StatusCode::INVALID_ARGUMENT,
+                                        request_.has_open() ? "open: the session is already open; send frame requests"
+                                                            : "kind: empty StreamRequest (set open or frame)"});
                 }
                 delay = pose_rate_.take(Clock::now());
             }
@@ -133,10 +144,11 @@ void StreamSession::postpone_read(Clock::duration delay) {
     auto alarm = std::make_unique<grpc::Alarm>();
     // A weak reference: the alarm lives in the session, and while the read is postponed the
     // session cannot finish, so self_ keeps it alive until the alarm has fired.
-    alarm->Set(std::chrono::system_clock::now() + std::chrono::duration_cast<std::chrono::system_clock::duration>(delay),
-               [weak = weak_from_this()](bool) {
-                   if (auto self = weak.lock()) self->on_read_alarm();
-               });
+    alarm->Set(
+        std::chrono::system_clock::now() + std::chrono::duration_cast<std::chrono::system_clock::duration>(delay),
+        [weak = weak_from_this()](bool) {
+            if (auto self = weak.lock()) self->on_read_alarm();
+        });
     std::unique_ptr<grpc::Alarm> previous;  // fired long ago; destroyed outside the lock
     std::lock_guard lock(mutex_);
     previous = std::move(read_alarm_);
@@ -184,16 +196,17 @@ bool StreamSession::cancel_if_stalled(Clock::time_point now, std::chrono::millis
         if (phase_ == Phase::finished || under_way_.cancel || !under_way_.write || now - write_started_ <= timeout)
             return false;
         stalled_ms = std::chrono::duration<double, std::milli>(now - write_started_).count();
-        request_finish_locked({grpc::StatusCode::DEADLINE_EXCEEDED,
-                               "stall-timeout: the client took no frame off the wire for " +
-                                   std::to_string(static_cast<long>(stalled_ms)) + " ms (limit " +
-                                   std::to_string(timeout.count()) + " ms)"});
+        request_finish_locked(
+            {grpc::StatusCode::DEADLINE_EXCEEDED, "stall-timeout: the client took no frame off the wire for " +
+                                                      std::to_string(static_cast<long>(stalled_ms)) + " ms (limit " +
+                                                      std::to_string(timeout.count()) + " ms)"});
         decided = finish_status_;
         under_way_.cancel = true;
     }
-    spdlog::warn("session {} ({}): a frame has waited {:.0f} ms for the client to read it; cancelling the stream "
-                 "(stall watchdog)",
-                 id_, peer_, stalled_ms);
+    spdlog::warn(
+        "session {} ({}): a frame has waited {:.0f} ms for the client to read it; cancelling the stream "
+        "(stall watchdog)",
+        id_, peer_, stalled_ms);
     cancel_call(decided);
     return true;
 }
@@ -221,9 +234,9 @@ bool StreamSession::finish_if_not_opened(Clock::time_point now, std::chrono::mil
         std::lock_guard lock(mutex_);
         if (phase_ != Phase::awaiting_open || now - started_ <= timeout) return false;
         // No write is under way before the session opens: Finish's trailers leave at once.
-        request_finish_locked({grpc::StatusCode::DEADLINE_EXCEEDED,
-                               "open-timeout: no opening message (StreamRequest.open) within " +
-                                   std::to_string(timeout.count()) + " ms of the call's start"});
+        request_finish_locked(
+            {grpc::StatusCode::DEADLINE_EXCEEDED, "open-timeout: no opening message (StreamRequest.open) within " +
+                                                      std::to_string(timeout.count()) + " ms of the call's start"});
         plan_locked(actions);
     }
     spdlog::info("session {} ({}): no opening message within {} ms; finishing the call", id_, peer_, timeout.count());
@@ -260,9 +273,9 @@ void StreamSession::handle_frame(const v1::FrameRequest& request, const grpc::St
     if (request.sequence() == 0)
         status = {grpc::StatusCode::INVALID_ARGUMENT, "frame.sequence: must be >= 1"};
     else if (request.sequence() <= last_request_sequence_)
-        status = {grpc::StatusCode::INVALID_ARGUMENT,
-                  "frame.sequence: " + std::to_string(request.sequence()) + " is not greater than the previous " +
-                      std::to_string(last_request_sequence_)};
+        status = {grpc::StatusCode::INVALID_ARGUMENT, "frame.sequence: " + std::to_string(request.sequence()) +
+                                                          " is not greater than the previous " +
+                                                          std::to_string(last_request_sequence_)};
     else if (!enum_values.ok())
         status = enum_values;
     else
@@ -315,12 +328,13 @@ void StreamSession::OnDone() {
     {
         std::lock_guard lock(mutex_);
         const double frames = static_cast<double>(stats_.frames_sent);
-        spdlog::info("session {} closed: {} '{}' after {:.1f} s; {} requests, {} frames ({:.1f}/s), {} poses and {} "
-                     "frames coalesced, {} re-sent for a repeated pose, {} errors, render {:.1f} ms, encode {:.1f} ms (means)",
-                     id_, static_cast<int>(finish_status_.error_code()), finish_status_.error_message(), seconds,
-                     stats_.requests_received, stats_.frames_sent, seconds > 0 ? frames / seconds : 0.0,
-                     stats_.poses_coalesced, stats_.frames_coalesced, stats_.frames_reused, stats_.frame_errors,
-                     frames > 0 ? render_ms_sum_ / frames : 0.0, frames > 0 ? encode_ms_sum_ / frames : 0.0);
+        spdlog::info(
+            "session {} closed: {} '{}' after {:.1f} s; {} requests, {} frames ({:.1f}/s), {} poses and {} "
+            "frames coalesced, {} re-sent for a repeated pose, {} errors, render {:.1f} ms, encode {:.1f} ms (means)",
+            id_, static_cast<int>(finish_status_.error_code()), finish_status_.error_message(), seconds,
+            stats_.requests_received, stats_.frames_sent, seconds > 0 ? frames / seconds : 0.0, stats_.poses_coalesced,
+            stats_.frames_coalesced, stats_.frames_reused, stats_.frame_errors,
+            frames > 0 ? render_ms_sum_ / frames : 0.0, frames > 0 ? encode_ms_sum_ / frames : 0.0);
     }
     core_.remove_stream(this);
     // Last use of `this` from gRPC. Workers may still hold references; the session (its
@@ -359,8 +373,8 @@ void StreamSession::set_buffered_locked(int frames, std::int64_t bytes) {
 
 // mutex_ held.
 bool StreamSession::served_locked() const {
-    const bool pipeline_empty = !render_busy_ && !pending_ && encoding_ == 0 && !under_way_.write && !next_image_ &&
-                                next_errors_.empty();
+    const bool pipeline_empty =
+        !render_busy_ && !pending_ && encoding_ == 0 && !under_way_.write && !next_image_ && next_errors_.empty();
     return phase_ == Phase::open && reads_done_ && pipeline_empty;
 }
 

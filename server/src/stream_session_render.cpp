@@ -9,7 +9,9 @@ namespace catgs::server {
 namespace {
 
 /// Bit-for-bit equality: a client that repeats a pose sends the same doubles.
-bool same_pose(const Pose& a, const Pose& b) { return a.rotation == b.rotation && a.translation == b.translation; }
+bool same_pose(const Pose& a, const Pose& b) {
+    return a.rotation == b.rotation && a.translation == b.translation;
+}
 
 }  // namespace
 
@@ -37,11 +39,11 @@ void StreamSession::initialise() {
             if (phase_ == Phase::opening) {  // not when the stream ended meanwhile
                 phase_ = Phase::open;
                 const Intrinsics& k = setup_.intrinsics;
-                spdlog::info("session {} opened by {}: scene {}, {}x{} fx {:.1f}, {}{}, {}, max {} unacked", id_, peer_,
-                             setup_.scene_id, k.width, k.height, k.fx, format_name(setup_.encode.format),
-                             setup_.encode.format == Format::jpeg ? " q" + std::to_string(setup_.encode.jpeg_quality)
-                                                                  : "",
-                             renderer_->name(), setup_.max_unacked_frames);
+                spdlog::info(
+                    "session {} opened by {}: scene {}, {}x{} fx {:.1f}, {}{}, {}, max {} unacked", id_, peer_,
+                    setup_.scene_id, k.width, k.height, k.fx, format_name(setup_.encode.format),
+                    setup_.encode.format == Format::jpeg ? " q" + std::to_string(setup_.encode.jpeg_quality) : "",
+                    renderer_->name(), setup_.max_unacked_frames);
             }
         }
         plan_locked(actions);
@@ -117,9 +119,9 @@ void StreamSession::render(PendingPose pose) {
 
     v1::Frame frame =
         rendered_frame(pose.frame, setup_.encode.format, image, frame_stats, {pose.received, begin, rendered});
-    const bool posted = core_.encode_pool().post(
-        [self = shared_from_this(), image = std::move(image), frame = std::move(frame), received = pose.received,
-         view = pose.frame.camera.pose]() mutable {
+    const bool posted =
+        core_.encode_pool().post([self = shared_from_this(), image = std::move(image), frame = std::move(frame),
+                                  received = pose.received, view = pose.frame.camera.pose]() mutable {
             if (const grpc::Status status = encode_frame(image, self->setup_.encode, received, frame); !status.ok()) {
                 frame.mutable_error()->set_code(static_cast<int>(status.error_code()));
                 frame.mutable_error()->set_message(status.error_message());
@@ -152,7 +154,8 @@ void StreamSession::deliver(v1::Frame frame, const Pose& view) {
             drop_unacked_locked(sequence);
         } else if (frame.has_error()) {
             drop_unacked_locked(sequence);
-            error_frame_locked(sequence, {static_cast<grpc::StatusCode>(frame.error().code()), frame.error().message()});
+            error_frame_locked(sequence,
+                               {static_cast<grpc::StatusCode>(frame.error().code()), frame.error().message()});
         } else if (sequence < newest_image_sequence_) {
             // Encoded out of order behind a newer frame: it is stale.
             ++stats_.frames_coalesced;

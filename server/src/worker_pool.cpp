@@ -9,7 +9,9 @@ WorkerPool::WorkerPool(std::string name, int threads) : name_(std::move(name)) {
     for (int i = 0; i < threads; ++i) threads_.emplace_back([this] { run(); });
 }
 
-WorkerPool::~WorkerPool() { stop(); }
+WorkerPool::~WorkerPool() {
+    stop();
+}
 
 bool WorkerPool::post(std::function<void()> task) {
     {

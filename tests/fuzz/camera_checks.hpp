@@ -27,8 +27,8 @@ inline void check_camera(const Camera& camera, const std::string& what) {
             const double d = r[3 * i] * r[3 * j] + r[3 * i + 1] * r[3 * j + 1] + r[3 * i + 2] * r[3 * j + 2];
             require(std::fabs(d - (i == j ? 1.0 : 0.0)) < 1e-6, what + ": rotation is not orthonormal");
         }
-    const double det = r[0] * (r[4] * r[8] - r[5] * r[7]) - r[1] * (r[3] * r[8] - r[5] * r[6]) +
-                       r[2] * (r[3] * r[7] - r[4] * r[6]);
+    const double det =
+        r[0] * (r[4] * r[8] - r[5] * r[7]) - r[1] * (r[3] * r[8] - r[5] * r[6]) + r[2] * (r[3] * r[7] - r[4] * r[6]);
     require(det > 0, what + ": rotation is a reflection");
 }
 

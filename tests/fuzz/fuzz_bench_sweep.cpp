@@ -40,8 +40,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     static catgs::fuzz::MemoryFile file;
     const std::string text = catgs::fuzz::as_string(data, size);
     const auto separators = std::count(text.begin(), text.end(), ';') + std::count(text.begin(), text.end(), '\n');
-    if (static_cast<std::size_t>(separators) >= kMaxEntries)
-        return -1;
+    if (static_cast<std::size_t>(separators) >= kMaxEntries) return -1;
     if (text.find('\n') != std::string::npos)
         check("@" + file.write(data, size));
     else if (text.empty() || text[0] != '@')  // a leading '@' names a file to read (/dev/zero...)

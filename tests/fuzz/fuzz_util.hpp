@@ -75,8 +75,8 @@ private:
 /// (scene_io.hpp, docs/formats.md, "Validation": one error line naming the file), or
 /// "<path>:<line>: ..." for the line-oriented trajectory format.
 inline void check_file_message(std::string_view message, const std::string& path) {
-    require(message.substr(0, path.size() + 1) == path + ":", "error message does not start with the path: " +
-                                                                    std::string(message));
+    require(message.substr(0, path.size() + 1) == path + ":",
+            "error message does not start with the path: " + std::string(message));
     require(message.find('\n') == std::string_view::npos, "error message is not one line: " + std::string(message));
 }
 

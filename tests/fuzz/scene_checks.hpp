@@ -23,8 +23,7 @@ inline void check_scene(const Scene& scene, const LoadReport& report, const Load
     const std::size_t n = scene.count();
     require(n > 0, "a scene loaded without Gaussians");
     require(report.records <= options.max_records, "more records than max_records");
-    require(n + report.dropped_invalid + report.dropped_transparent == report.records,
-            "kept + dropped != records");
+    require(n + report.dropped_invalid + report.dropped_transparent == report.records, "kept + dropped != records");
     require(options.drop_invalid || report.dropped_invalid == 0, "records dropped without drop_invalid");
     for (int a = 0; a < 3; ++a) {
         require(std::isfinite(scene.origin[a]), "non-finite origin");

@@ -52,8 +52,10 @@ TEST_F(CudaChunkTest, SkippedChunksChangeNothing) {
             RenderOptions off = on;
             off.chunk_culling = false;
             FrameStats with_stats, without_stats;
-            const ImageRGB8 with = session.render(cam, on, &with_stats), without = session.render(cam, off, &without_stats);
-            ASSERT_EQ(with.rgb, without.rgb) << culling_name(mode) << " camera " << k << " (CATGS_TEST_SEED=" << seed << ")";
+            const ImageRGB8 with = session.render(cam, on, &with_stats),
+                            without = session.render(cam, off, &without_stats);
+            ASSERT_EQ(with.rgb, without.rgb)
+                << culling_name(mode) << " camera " << k << " (CATGS_TEST_SEED=" << seed << ")";
             ASSERT_EQ(with_stats.pairs, without_stats.pairs) << culling_name(mode) << " camera " << k;
             EXPECT_EQ(without_stats.chunks_culled, 0u);
             culled += with_stats.chunks_culled;
@@ -98,8 +100,8 @@ TEST_F(CudaChunkTest, SpeculativeCacheDrawsTheSameFrames) {
 // against the CPU reference, and the share of chunks a survey frame skips.
 TEST_F(CudaChunkTest, PartitionedCityMatchesTheCpuReference) {
     const Scene city = load_scene("builtin:city?gaussians=200000&seed=5");
-    const std::vector<Camera> path =
-        make_trajectory("builtin:survey?frames=6&altitude=70&pitch=-45", city.bounds, intrinsics_from_fov(480, 270, 60));
+    const std::vector<Camera> path = make_trajectory("builtin:survey?frames=6&altitude=70&pitch=-45", city.bounds,
+                                                     intrinsics_from_fov(480, 270, 60));
     GpuSession session(city);
     CpuRenderer<float> cpu;
     for (std::size_t f = 0; f < path.size(); ++f) {

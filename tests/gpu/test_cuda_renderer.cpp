@@ -39,8 +39,8 @@ ImageRGB8 cpu_render(const Scene& scene, const Camera& camera, const RenderOptio
     return to_rgb8(out);
 }
 
-ImageRGB8 gpu_render(const Scene& scene, const Camera& camera, const RenderOptions& options, FrameStats* stats = nullptr,
-                     cuda::CudaLimits limits = {}) {
+ImageRGB8 gpu_render(const Scene& scene, const Camera& camera, const RenderOptions& options,
+                     FrameStats* stats = nullptr, cuda::CudaLimits limits = {}) {
     cuda::CudaRenderer<float> renderer(nullptr, limits);
     renderer.set_scene(std::make_shared<cuda::DeviceScene>(scene, renderer.stream()));
     ImageRGB8 out;
@@ -49,7 +49,8 @@ ImageRGB8 gpu_render(const Scene& scene, const Camera& camera, const RenderOptio
     return out;
 }
 
-void expect_matches_cpu(const Scene& scene, const Camera& camera, const RenderOptions& options, const std::string& what) {
+void expect_matches_cpu(const Scene& scene, const Camera& camera, const RenderOptions& options,
+                        const std::string& what) {
     FrameStats stats;
     const ImageRGB8 gpu = gpu_render(scene, camera, options, &stats);
     const ImageRGB8 cpu = cpu_render(scene, camera, options);
@@ -96,8 +97,8 @@ TEST_F(CudaRendererTest, TruckSplatMatchesCpu) {
     const std::string path = test::shared_dir() + "/data/scenes/tandt-truck-uav4geo/truck.splat";
     if (!std::filesystem::exists(path)) GTEST_SKIP() << path << " not present";
     const Scene truck = read_splat(path);
-    const auto cameras = make_trajectory("builtin:orbit?frames=8&up=-y&altitude=1.5", truck.bounds,
-                                         intrinsics_from_fov(800, 600, 60.0));
+    const auto cameras =
+        make_trajectory("builtin:orbit?frames=8&up=-y&altitude=1.5", truck.bounds, intrinsics_from_fov(800, 600, 60.0));
     expect_matches_cpu(truck, cameras[3], RenderOptions{}, "truck orbit");
 }
 
@@ -138,7 +139,8 @@ TEST_F(CudaRendererTest, EdgeCases) {
     }
     const Scene front = test::random_scene(test::fresh_seed("tiny images"), {});
     for (auto [w, h] : {std::pair{1, 1}, std::pair{1, 37}, std::pair{45, 1}, std::pair{17, 33}})
-        expect_matches_cpu(front, test::forward_camera(w, h, 60.0), RenderOptions{}, std::to_string(w) + "x" + std::to_string(h));
+        expect_matches_cpu(front, test::forward_camera(w, h, 60.0), RenderOptions{},
+                           std::to_string(w) + "x" + std::to_string(h));
 }
 
 // A pair budget below the frame's pairs: the frame is rendered in bands and equals the
@@ -190,8 +192,8 @@ TEST_F(CudaRendererTest, StageTimesCoverTheFrame) {
     const Scene scene = test::random_scene(test::fresh_seed("stage times"), p);
     FrameStats stats;
     gpu_render(scene, test::forward_camera(320, 240, 70.0), RenderOptions{}, &stats);
-    for (Stage stage : {Stage::preprocess, Stage::scan, Stage::keys, Stage::sort, Stage::ranges, Stage::rasterize,
-                        Stage::copy_out})
+    for (Stage stage :
+         {Stage::preprocess, Stage::scan, Stage::keys, Stage::sort, Stage::ranges, Stage::rasterize, Stage::copy_out})
         EXPECT_GT(stats.stage_ms[stage], 0.0) << stage_name(stage);
     EXPECT_EQ(stats.stage_ms[Stage::encode], 0.0);
     EXPECT_DOUBLE_EQ(stats.total_ms, stats.stage_ms.sum());

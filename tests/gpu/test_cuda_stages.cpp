@@ -136,13 +136,18 @@ std::size_t first_difference(const std::vector<V>& a, const std::vector<V>& b) {
     return a.size() == b.size() ? std::string::npos : n;
 }
 
-bool same_range(const TileRange& a, const TileRange& b) { return a.begin == b.begin && a.end == b.end; }
-bool same_task(const TileTask& a, const TileTask& b) { return a.tile == b.tile && a.index == b.index; }
+bool same_range(const TileRange& a, const TileRange& b) {
+    return a.begin == b.begin && a.end == b.end;
+}
+bool same_task(const TileTask& a, const TileTask& b) {
+    return a.tile == b.tile && a.index == b.index;
+}
 
 /// The pixels of tile `tile` inside the image, as indices into a tile's partial slot.
 std::vector<std::size_t> pixels_in_image(const View<double>& view, std::uint32_t tile) {
     std::vector<std::size_t> out;
-    const int x0 = static_cast<int>(tile % view.tiles_x) * kTileSize, y0 = static_cast<int>(tile / view.tiles_x) * kTileSize;
+    const int x0 = static_cast<int>(tile % view.tiles_x) * kTileSize,
+              y0 = static_cast<int>(tile / view.tiles_x) * kTileSize;
     for (int y = y0; y < std::min(y0 + kTileSize, view.height); ++y)
         for (int x = x0; x < std::min(x0 + kTileSize, view.width); ++x)
             out.push_back(static_cast<std::size_t>((y - y0) * kTileSize + (x - x0)));
@@ -176,10 +181,10 @@ void expect_identical_stages(const CpuRenderer<double>& cpu, const cuda::StageRe
                 const Partial<double>* c = cpu.partial(tile, index);
                 ASSERT_TRUE(g && c) << what << ": tile " << tile << " sub-task " << index;
                 for (std::size_t px : pixels_in_image(view, tile))
-                    worst = std::max({worst, std::abs(g[px].colour.x - c[px].colour.x),
-                                      std::abs(g[px].colour.y - c[px].colour.y),
-                                      std::abs(g[px].colour.z - c[px].colour.z),
-                                      std::abs(g[px].transmittance - c[px].transmittance)});
+                    worst =
+                        std::max({worst, std::abs(g[px].colour.x - c[px].colour.x),
+                                  std::abs(g[px].colour.y - c[px].colour.y), std::abs(g[px].colour.z - c[px].colour.z),
+                                  std::abs(g[px].transmittance - c[px].transmittance)});
             }
         }
     }
@@ -224,8 +229,9 @@ TEST_F(CudaStagesTest, DoubleCachedFramesEqualTheCpuStages) {
         if (both.gpu_stats.key_frame != both.cpu_stats.key_frame || both.gpu_stats.window != both.cpu_stats.window ||
             both.gpu_stats.order_reused != both.cpu_stats.order_reused)
             break;
-        expect_identical_stages(both.cpu, both.stages, make_view<double>(camera, scene.host.origin),
-                                "cached run frame " + std::to_string(frame) + (both.gpu_stats.key_frame ? " (key)" : ""));
+        expect_identical_stages(
+            both.cpu, both.stages, make_view<double>(camera, scene.host.origin),
+            "cached run frame " + std::to_string(frame) + (both.gpu_stats.key_frame ? " (key)" : ""));
         ++compared;
         cached += !both.gpu_stats.key_frame;
     }
@@ -241,8 +247,8 @@ TEST_F(CudaStagesTest, DoubleCachedFramesEqualTheCpuStages) {
 bool outside_band(const Projected<double>& g, Culling culling, const View<double>& view, std::uint32_t tile) {
     const bool base = touches_tile(g, culling, view, tile);
     const double d = kBandShiftPx;
-    for (const auto& [dx, dy] : std::vector<std::pair<double, double>>{
-             {d, 0}, {-d, 0}, {0, d}, {0, -d}, {d, d}, {d, -d}, {-d, d}, {-d, -d}}) {
+    for (const auto& [dx, dy] :
+         std::vector<std::pair<double, double>>{{d, 0}, {-d, 0}, {0, d}, {0, -d}, {d, d}, {d, -d}, {-d, d}, {-d, -d}}) {
         Projected<double> p = g;
         p.mean.x += dx;
         p.mean.y += dy;
@@ -257,11 +263,13 @@ bool outside_band(const Projected<double>& g, Culling culling, const View<double
     return true;
 }
 
-std::uint32_t depth_bits(std::uint64_t key) { return static_cast<std::uint32_t>(key); }
+std::uint32_t depth_bits(std::uint64_t key) {
+    return static_cast<std::uint32_t>(key);
+}
 
 /// (tile, Gaussian) -> key of every pair.
 std::map<std::pair<std::uint32_t, std::uint32_t>, std::uint64_t> pair_map(const std::vector<std::uint64_t>& keys,
-                                                                           const std::vector<std::uint32_t>& values) {
+                                                                          const std::vector<std::uint32_t>& values) {
     std::map<std::pair<std::uint32_t, std::uint32_t>, std::uint64_t> out;
     for (std::size_t i = 0; i < keys.size(); ++i) out[{key_tile(keys[i]), values[i]}] = keys[i];
     return out;
@@ -300,8 +308,8 @@ BandReport check_keys(const CpuRenderer<float>& cpu, const cuda::StageReadback<f
         const std::uint32_t a = depth_bits(key), b = depth_bits(it->second);
         if (a != b) {
             ++r.depth_ulps;
-            EXPECT_LE(a > b ? a - b : b - a, 1u) << what << ": depth of (tile " << pair.first << ", Gaussian "
-                                                 << pair.second << ")";
+            EXPECT_LE(a > b ? a - b : b - a, 1u)
+                << what << ": depth of (tile " << pair.first << ", Gaussian " << pair.second << ")";
         }
     }
     for (const auto& [pair, key] : c) {

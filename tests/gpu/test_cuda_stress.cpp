@@ -29,17 +29,17 @@ namespace catgs {
 namespace {
 
 using test::stress::Bound;
+using test::stress::cache_vs_full_levels;
 using test::stress::Config;
+using test::stress::count_nonfinite;
 using test::stress::Family;
 using test::stress::Frame;
-using test::stress::Mode;
-using test::stress::StressCase;
-using test::stress::cache_vs_full_levels;
-using test::stress::count_nonfinite;
 using test::stress::kBackground;
+using test::stress::Mode;
 using test::stress::one_gaussian;
 using test::stress::options_for;
 using test::stress::seed_note;
+using test::stress::StressCase;
 namespace stress = test::stress;
 
 class CudaStressTest : public ::testing::Test {
@@ -51,9 +51,13 @@ protected:
 };
 
 /// cuda::CudaRenderer<float> is float only.
-std::vector<Config> all_configs() { return stress::all_configs(/*with_double=*/false); }
+std::vector<Config> all_configs() {
+    return stress::all_configs(/*with_double=*/false);
+}
 
-std::string cuda_name(const Config& cfg) { return "cuda " + cfg.name(); }
+std::string cuda_name(const Config& cfg) {
+    return "cuda " + cfg.name();
+}
 
 /// Frame 0 (plain, split) or the whole path through one renderer (cache).
 std::vector<Frame> gpu_frames(const StressCase& c, Culling culling, Mode mode) {
@@ -70,7 +74,9 @@ std::vector<Frame> gpu_frames(const StressCase& c, Culling culling, Mode mode) {
     return out;
 }
 
-ImageRGB8 reference(const Scene& scene, const Camera& camera) { return stress::reference_frame(scene, camera).rgb8; }
+ImageRGB8 reference(const Scene& scene, const Camera& camera) {
+    return stress::reference_frame(scene, camera).rgb8;
+}
 
 // --- Bounds -----------------------------------------------------------------------------
 // Measured with StressProperty.DISABLED_MeasureBounds/cuda on an H200 (the device these runs
@@ -135,14 +141,19 @@ FamilyBounds bounds_for(Family f) {
 Bound bound_for(Family f, const Config& cfg) {
     const FamilyBounds b = bounds_for(f);
     switch (stress::bound_class(cfg)) {
-        case stress::BoundClass::bbox3sigma: return b.bbox;
-        case stress::BoundClass::split: return b.split;
-        case stress::BoundClass::lossless: return b.lossless;
+        case stress::BoundClass::bbox3sigma:
+            return b.bbox;
+        case stress::BoundClass::split:
+            return b.split;
+        case stress::BoundClass::lossless:
+            return b.lossless;
     }
     return {};
 }
 
-std::string class_label(const Config& cfg) { return stress::bound_class_name(stress::bound_class(cfg)); }
+std::string class_label(const Config& cfg) {
+    return stress::bound_class_name(stress::bound_class(cfg));
+}
 
 /// The CUDA backend of the shared suite: float only, the 8-bit image written on the device.
 class CudaStressBackend final : public stress::Backend {
@@ -205,12 +216,14 @@ TEST_F(CudaStressTest, Huge8192x8192) {
         for (std::size_t b = 0; b < boxes.size(); ++b)
             worst = std::max(worst, stress::worst_in_crop(size, level, boxes[b], refs[b], covered));
         std::size_t stray = 0;
-        const ImageRGB8 bg{1, 1, {quantize_8bit(kBackground[0]), quantize_8bit(kBackground[1]), quantize_8bit(kBackground[2])}};
+        const ImageRGB8 bg{
+            1, 1, {quantize_8bit(kBackground[0]), quantize_8bit(kBackground[1]), quantize_8bit(kBackground[2])}};
         for (std::size_t i = 0; i < covered.size(); ++i)
             if (!covered[i])
                 for (int ch = 0; ch < 3; ++ch) stray += f.rgb8.rgb[3 * i + ch] != bg.rgb[static_cast<std::size_t>(ch)];
-        std::cout << "[cuda stress] 8192x8192 " << cuda_name(cfg) << ": " << ms << " ms, " << f.stats.pairs << " pairs, "
-                  << boxes.size() << " crops, worst " << worst << " levels, " << stray << " stray values" << std::endl;
+        std::cout << "[cuda stress] 8192x8192 " << cuda_name(cfg) << ": " << ms << " ms, " << f.stats.pairs
+                  << " pairs, " << boxes.size() << " crops, worst " << worst << " levels, " << stray << " stray values"
+                  << std::endl;
         // Float on the GPU against the double reference: one level at thresholds, and the 1e-4
         // stop flipping where opaque (1.0) Gaussians overlap; split and bbox3sigma add theirs.
         EXPECT_LE(worst, std::max(3, bound_for(Family::tiny_scales, cfg).max_levels))
@@ -253,7 +266,8 @@ TEST_F(CudaStressTest, NearPlaneCentreBehindAndOnThePlane) {
     const Camera cam = test::forward_camera(40, 30, 60);
     for (Culling culling : {Culling::exact, Culling::bbox3sigma, Culling::opacity_aware}) {
         auto visible = [&](float z) {
-            const Frame f = gpu_one(one_gaussian({0, 0, z}, {0.01f, 0.01f, 0.01f}, {1, 0, 0, 0}, 0.9f, {1, 1, 1}), cam, culling);
+            const Frame f =
+                gpu_one(one_gaussian({0, 0, z}, {0.01f, 0.01f, 0.01f}, {1, 0, 0, 0}, 0.9f, {1, 1, 1}), cam, culling);
             EXPECT_EQ(count_nonfinite(f.image), 0u);
             return f.stats.visible;
         };
@@ -273,8 +287,10 @@ TEST_F(CudaStressTest, NanOpacityAndFarOffScreenMeansDrawNothing) {
     for (Culling culling : {Culling::exact, Culling::bbox3sigma, Culling::opacity_aware}) {
         const Scene nan = one_gaussian({0, 0, 3}, {0.1f, 0.1f, 0.1f}, {1, 0, 0, 0}, stress::kNaN, {2, -1, -1});
         EXPECT_EQ(gpu_one(nan, cam, culling).rgb8.rgb, empty.rgb) << "NaN opacity, " << culling_name(culling);
-        const Scene far = one_gaussian({1e20f, 1e20f, 3}, {0.3f, 0.1f, 0.05f}, {0.9f, 0.3f, -0.2f, 0.25f}, 0.8f, {2, -1, -1});
-        EXPECT_EQ(gpu_one(far, cam, culling).rgb8.rgb, empty.rgb) << "mean 1e21 px off-screen, " << culling_name(culling);
+        const Scene far =
+            one_gaussian({1e20f, 1e20f, 3}, {0.3f, 0.1f, 0.05f}, {0.9f, 0.3f, -0.2f, 0.25f}, 0.8f, {2, -1, -1});
+        EXPECT_EQ(gpu_one(far, cam, culling).rgb8.rgb, empty.rgb)
+            << "mean 1e21 px off-screen, " << culling_name(culling);
     }
 }
 
@@ -282,7 +298,8 @@ TEST_F(CudaStressTest, ExtremeShColoursKeepTheFloatImageFinite) {
     const Camera cam = test::forward_camera(48, 32, 60);
     for (float v : {1e38f, 3.4e38f, stress::kInf})
         for (Culling culling : {Culling::exact, Culling::opacity_aware}) {
-            const Frame f = gpu_one(one_gaussian({0, 0, 3}, {0.5f, 0.5f, 0.5f}, {1, 0, 0, 0}, 0.7f, {0, 0, 0}, 3, v), cam, culling);
+            const Frame f =
+                gpu_one(one_gaussian({0, 0, 3}, {0.5f, 0.5f, 0.5f}, {1, 0, 0, 0}, 0.7f, {0, 0, 0}, 3, v), cam, culling);
             EXPECT_EQ(count_nonfinite(f.image), 0u) << "SH " << v << ", " << culling_name(culling);
             EXPECT_EQ(to_rgb8(f.image).rgb, f.rgb8.rgb) << "SH " << v << ", " << culling_name(culling);
         }

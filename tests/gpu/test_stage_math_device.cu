@@ -73,12 +73,14 @@ private:
 template <typename Kernel, typename... Args>
 void launch(std::size_t n, const char* what, Kernel kernel, Args... args) {
     const unsigned blocks = static_cast<unsigned>((n + 127) / 128);
-    kernel<<<blocks > 0 ? blocks : 1, 128>>>(args...);
+    kernel < < <blocks> 0 ? blocks : 1, 128 >>> (args...);
     check_cuda(cudaGetLastError(), what);
     check_cuda(cudaDeviceSynchronize(), what);
 }
 
-__device__ int thread_index() { return static_cast<int>(blockIdx.x * blockDim.x + threadIdx.x); }
+__device__ int thread_index() {
+    return static_cast<int>(blockIdx.x * blockDim.x + threadIdx.x);
+}
 
 class StageDevice : public ::testing::Test {
 protected:
@@ -88,13 +90,15 @@ protected:
     }
 };
 
-std::string seed_note(std::uint64_t seed) { return " (CATGS_TEST_SEED=" + std::to_string(seed) + ")"; }
+std::string seed_note(std::uint64_t seed) {
+    return " (CATGS_TEST_SEED=" + std::to_string(seed) + ")";
+}
 
 // --- Projection geometry ----------------------------------------------------------------
 
 template <typename T>
-__global__ void project_kernel(const float* positions, const float* scales, const float* rotations, const float* opacities,
-                               int n, View<T> view, Projected<T>* out, int* visible) {
+__global__ void project_kernel(const float* positions, const float* scales, const float* rotations,
+                               const float* opacities, int n, View<T> view, Projected<T>* out, int* visible) {
     const int i = thread_index();
     if (i >= n) return;
     const GaussianRef g{positions + 3 * i, scales + 3 * i, rotations + 4 * i, opacities[i], nullptr, 0};
@@ -109,9 +113,11 @@ void expect_same_projection(const Projected<T>& host, const Projected<T>& device
     EXPECT_TRUE(same_bits(host.conic.x, device.conic.x) && same_bits(host.conic.y, device.conic.y) &&
                 same_bits(host.conic.z, device.conic.z))
         << what << ": conic";
-    EXPECT_TRUE(same_bits(host.cov.x, device.cov.x) && same_bits(host.cov.y, device.cov.y) && same_bits(host.cov.z, device.cov.z))
+    EXPECT_TRUE(same_bits(host.cov.x, device.cov.x) && same_bits(host.cov.y, device.cov.y) &&
+                same_bits(host.cov.z, device.cov.z))
         << what << ": cov";
-    EXPECT_TRUE(same_bits(host.depth, device.depth) && same_bits(host.opacity, device.opacity)) << what << ": depth, opacity";
+    EXPECT_TRUE(same_bits(host.depth, device.depth) && same_bits(host.opacity, device.opacity))
+        << what << ": depth, opacity";
     EXPECT_TRUE(same_bits(host.key_depth, device.key_depth)) << what << ": key depth";
 }
 
@@ -128,8 +134,8 @@ void project_on_both(const char* precision) {
         DeviceArray<float> positions(g.positions), scales(g.scales), rotations(g.rotations), opacities(g.opacities);
         DeviceArray<Projected<T>> out(g.count());
         DeviceArray<int> shown(g.count());
-        launch(g.count(), "project_kernel", project_kernel<T>, positions.get(), scales.get(), rotations.get(), opacities.get(), n,
-               view, out.get(), shown.get());
+        launch(g.count(), "project_kernel", project_kernel<T>, positions.get(), scales.get(), rotations.get(),
+               opacities.get(), n, view, out.get(), shown.get());
         const std::vector<Projected<T>> device = out.download();
         const std::vector<int> device_visible = shown.download();
         for (int i = 0; i < n; ++i) {
@@ -145,8 +151,12 @@ void project_on_both(const char* precision) {
     EXPECT_GT(visible, 10000);
 }
 
-TEST_F(StageDevice, ProjectionGeometryIsTheHostsInFloat) { project_on_both<float>("float"); }
-TEST_F(StageDevice, ProjectionGeometryIsTheHostsInDouble) { project_on_both<double>("double"); }
+TEST_F(StageDevice, ProjectionGeometryIsTheHostsInFloat) {
+    project_on_both<float>("float");
+}
+TEST_F(StageDevice, ProjectionGeometryIsTheHostsInDouble) {
+    project_on_both<double>("double");
+}
 
 // --- The opacity level, and the inputs of the tile and envelope tests ---------------------
 
@@ -174,29 +184,33 @@ std::vector<Projected<float>> agreeing_projected(std::mt19937_64& rng, std::size
 
 // --- Tile rectangles and the ellipse-tile test ------------------------------------------
 
-__global__ void tile_rect_kernel(const Projected<float>* g, const float* guard, int n, int tiles_x, int tiles_y, TileRect* bbox,
-                                 TileRect* opacity_aware) {
+__global__ void tile_rect_kernel(const Projected<float>* g, const float* guard, int n, int tiles_x, int tiles_y,
+                                 TileRect* bbox, TileRect* opacity_aware) {
     const int i = thread_index();
     if (i >= n) return;
     bbox[i] = tile_rect(g[i], Culling::bbox3sigma, tiles_x, tiles_y, guard[i]);
     opacity_aware[i] = tile_rect(g[i], Culling::opacity_aware, tiles_x, tiles_y, guard[i]);
 }
 
-bool same_rect(const TileRect& a, const TileRect& b) { return a.x0 == b.x0 && a.y0 == b.y0 && a.x1 == b.x1 && a.y1 == b.y1; }
+bool same_rect(const TileRect& a, const TileRect& b) {
+    return a.x0 == b.x0 && a.y0 == b.y0 && a.x1 == b.x1 && a.y1 == b.y1;
+}
 
 TEST_F(StageDevice, TileRectsAreTheHosts) {
     const std::uint64_t seed = test::fresh_seed("stage device tile rect");
     std::mt19937_64 rng(seed);
     for (int trial = 0; trial < 10; ++trial) {
-        const int width = static_cast<int>(stage::uniform(rng, 1, 2000)), height = static_cast<int>(stage::uniform(rng, 1, 1200));
+        const int width = static_cast<int>(stage::uniform(rng, 1, 2000)),
+                  height = static_cast<int>(stage::uniform(rng, 1, 1200));
         const std::vector<Projected<float>> g = agreeing_projected(rng, 5000, width, height);
         std::vector<float> guard;
-        for (std::size_t i = 0; i < g.size(); ++i) guard.push_back(i % 3 == 0 ? static_cast<float>(stage::uniform(rng, 0, 8)) : 0.0f);
+        for (std::size_t i = 0; i < g.size(); ++i)
+            guard.push_back(i % 3 == 0 ? static_cast<float>(stage::uniform(rng, 0, 8)) : 0.0f);
         DeviceArray<Projected<float>> in(g);
         DeviceArray<float> guards(guard);
         DeviceArray<TileRect> bbox(g.size()), oa(g.size());
-        launch(g.size(), "tile_rect_kernel", tile_rect_kernel, in.get(), guards.get(), static_cast<int>(g.size()), tiles_for(width),
-               tiles_for(height), bbox.get(), oa.get());
+        launch(g.size(), "tile_rect_kernel", tile_rect_kernel, in.get(), guards.get(), static_cast<int>(g.size()),
+               tiles_for(width), tiles_for(height), bbox.get(), oa.get());
         const std::vector<TileRect> device_bbox = bbox.download(), device_oa = oa.download();
         for (std::size_t i = 0; i < g.size(); ++i) {
             const TileRect hb = tile_rect(g[i], Culling::bbox3sigma, tiles_for(width), tiles_for(height), guard[i]);
@@ -212,7 +226,8 @@ struct TileProbe {
     float guard;
 };
 
-__global__ void ellipse_kernel(const Projected<float>* g, const TileProbe* probes, int n, int width, int height, int* touches) {
+__global__ void ellipse_kernel(const Projected<float>* g, const TileProbe* probes, int n, int width, int height,
+                               int* touches) {
     const int i = thread_index();
     if (i >= n) return;
     const TileProbe p = probes[i];
@@ -225,7 +240,8 @@ TEST_F(StageDevice, EllipseTileTestIsTheHosts) {
     std::mt19937_64 rng(seed);
     int touched = 0, missed = 0;
     for (int trial = 0; trial < 10; ++trial) {
-        const int width = static_cast<int>(stage::uniform(rng, 17, 600)), height = static_cast<int>(stage::uniform(rng, 17, 400));
+        const int width = static_cast<int>(stage::uniform(rng, 17, 600)),
+                  height = static_cast<int>(stage::uniform(rng, 17, 400));
         const std::vector<Projected<float>> g = agreeing_projected(rng, 2000, width, height);
         std::vector<TileProbe> probes;
         for (std::size_t i = 0; i < g.size(); ++i) {
@@ -239,15 +255,16 @@ TEST_F(StageDevice, EllipseTileTestIsTheHosts) {
         DeviceArray<Projected<float>> in(g);
         DeviceArray<TileProbe> device_probes(probes);
         DeviceArray<int> out(probes.size());
-        launch(probes.size(), "ellipse_kernel", ellipse_kernel, in.get(), device_probes.get(), static_cast<int>(probes.size()),
-               width, height, out.get());
+        launch(probes.size(), "ellipse_kernel", ellipse_kernel, in.get(), device_probes.get(),
+               static_cast<int>(probes.size()), width, height, out.get());
         const std::vector<int> device = out.download();
         for (std::size_t k = 0; k < probes.size(); ++k) {
             const TileProbe& p = probes[k];
             const Projected<float>& gi = g[static_cast<std::size_t>(p.gaussian)];
             const bool host = ellipse_touches_tile(gi, opacity_level(gi.opacity), p.tx, p.ty, width, height, p.guard);
             (host ? touched : missed) += 1;
-            EXPECT_EQ(device[k] != 0, host) << "gaussian " << p.gaussian << ", tile " << p.tx << "," << p.ty << seed_note(seed);
+            EXPECT_EQ(device[k] != 0, host)
+                << "gaussian " << p.gaussian << ", tile " << p.tx << "," << p.ty << seed_note(seed);
         }
     }
     EXPECT_GT(touched, 1000);
@@ -256,8 +273,8 @@ TEST_F(StageDevice, EllipseTileTestIsTheHosts) {
 
 // --- Sort keys ---------------------------------------------------------------------------
 
-__global__ void keys_kernel(const std::uint32_t* tiles, const float* depths, int n, std::uint64_t* keys, std::uint32_t* tiles_back,
-                            int* tile_bits) {
+__global__ void keys_kernel(const std::uint32_t* tiles, const float* depths, int n, std::uint64_t* keys,
+                            std::uint32_t* tiles_back, int* tile_bits) {
     const int i = thread_index();
     if (i >= n) return;
     keys[i] = make_sort_key(tiles[i], depths[i]);
@@ -278,8 +295,8 @@ TEST_F(StageDevice, SortKeysAreTheHosts) {
     DeviceArray<float> in_depths(depths);
     DeviceArray<std::uint64_t> keys(tiles.size());
     DeviceArray<int> bits(tiles.size());
-    launch(tiles.size(), "keys_kernel", keys_kernel, in_tiles.get(), in_depths.get(), static_cast<int>(tiles.size()), keys.get(),
-           back.get(), bits.get());
+    launch(tiles.size(), "keys_kernel", keys_kernel, in_tiles.get(), in_depths.get(), static_cast<int>(tiles.size()),
+           keys.get(), back.get(), bits.get());
     const std::vector<std::uint64_t> device_keys = keys.download();
     const std::vector<std::uint32_t> device_tiles = back.download();
     const std::vector<int> device_bits = bits.download();
@@ -295,11 +312,12 @@ TEST_F(StageDevice, SortKeysAreTheHosts) {
 /// Per pixel list l, entries [list_begin[l], list_begin[l + 1]) split with threshold k[l]:
 /// each sub-task blends its slice from T = 1 (as stage_inputs.hpp's blend_slice does on the
 /// host), and the merge composites the partials.
-__global__ void merge_kernel(const float* alphas, const float* colours, const int* list_begin, const std::uint32_t* k, int lists,
-                             MergeState<float>* out) {
+__global__ void merge_kernel(const float* alphas, const float* colours, const int* list_begin, const std::uint32_t* k,
+                             int lists, MergeState<float>* out) {
     const int l = thread_index();
     if (l >= lists) return;
-    const std::uint64_t begin = static_cast<std::uint64_t>(list_begin[l]), end = static_cast<std::uint64_t>(list_begin[l + 1]);
+    const std::uint64_t begin = static_cast<std::uint64_t>(list_begin[l]),
+                        end = static_cast<std::uint64_t>(list_begin[l + 1]);
     MergeState<float> m;
     const std::uint32_t parts = split_count(end - begin, k[l]) + 1;
     for (std::uint32_t s = 0; s < parts; ++s) {
@@ -307,7 +325,8 @@ __global__ void merge_kernel(const float* alphas, const float* colours, const in
         subtask_range(begin, end, k[l], s, first, last);
         PixelAccumulator<float> acc;
         for (std::uint64_t i = first; i < last; ++i)
-            blend_power(acc, 0.0f, alphas[i], Vec3<float>{colours[3 * i], colours[3 * i + 1], colours[3 * i + 2]}, 0.0f);
+            blend_power(acc, 0.0f, alphas[i], Vec3<float>{colours[3 * i], colours[3 * i + 1], colours[3 * i + 2]},
+                        0.0f);
         merge_partial(m, Partial<float>{acc.colour, acc.transmittance});
     }
     out[l] = m;
@@ -334,7 +353,8 @@ TEST_F(StageDevice, MergeOfPartialsIsTheHosts) {
     DeviceArray<int> b(begin);
     DeviceArray<std::uint32_t> kk(k);
     DeviceArray<MergeState<float>> out(k.size());
-    launch(k.size(), "merge_kernel", merge_kernel, a.get(), c.get(), b.get(), kk.get(), static_cast<int>(k.size()), out.get());
+    launch(k.size(), "merge_kernel", merge_kernel, a.get(), c.get(), b.get(), kk.get(), static_cast<int>(k.size()),
+           out.get());
     const std::vector<MergeState<float>> device = out.download();
     int stopped = 0;
     for (std::size_t l = 0; l < k.size(); ++l) {
@@ -350,7 +370,8 @@ TEST_F(StageDevice, MergeOfPartialsIsTheHosts) {
         stopped += host.done;
         const MergeState<float>& d = device[l];
         EXPECT_TRUE(same_bits(host.colour.x, d.colour.x) && same_bits(host.colour.y, d.colour.y) &&
-                    same_bits(host.colour.z, d.colour.z) && same_bits(host.transmittance, d.transmittance) && host.done == d.done)
+                    same_bits(host.colour.z, d.colour.z) && same_bits(host.transmittance, d.transmittance) &&
+                    host.done == d.done)
             << "list " << l << seed_note(seed);
     }
     EXPECT_GT(stopped, 100);
@@ -364,8 +385,8 @@ struct EnvelopeOut {
     float enter_bound[2];
 };
 
-__global__ void envelope_kernel(const Projected<float>* g, const float* max_scale, int n, View<float> key, float guard, float move,
-                                EnvelopeOut* out) {
+__global__ void envelope_kernel(const Projected<float>* g, const float* max_scale, int n, View<float> key, float guard,
+                                float move, EnvelopeOut* out) {
     const int i = thread_index();
     if (i >= n) return;
     const float focal = key.fx > key.fy ? key.fx : key.fy;
@@ -388,19 +409,23 @@ TEST_F(StageDevice, EnvelopeBoundsAreTheHosts) {
         const View<float> key = make_view<float>(camera, {0, 0, 0});
         const std::vector<Projected<float>> g = agreeing_projected(rng, 5000, key.width, key.height);
         std::vector<float> max_scale;
-        for (std::size_t i = 0; i < g.size(); ++i) max_scale.push_back(static_cast<float>(stage::log_uniform(rng, 1e-4, 10)));
-        const float guard = static_cast<float>(stage::uniform(rng, 0, 4)), move = static_cast<float>(stage::uniform(rng, 0, 0.5));
+        for (std::size_t i = 0; i < g.size(); ++i)
+            max_scale.push_back(static_cast<float>(stage::log_uniform(rng, 1e-4, 10)));
+        const float guard = static_cast<float>(stage::uniform(rng, 0, 4)),
+                    move = static_cast<float>(stage::uniform(rng, 0, 0.5));
         DeviceArray<Projected<float>> in(g);
         DeviceArray<float> scales(max_scale);
         DeviceArray<EnvelopeOut> out(g.size());
-        launch(g.size(), "envelope_kernel", envelope_kernel, in.get(), scales.get(), static_cast<int>(g.size()), key, guard, move,
-               out.get());
+        launch(g.size(), "envelope_kernel", envelope_kernel, in.get(), scales.get(), static_cast<int>(g.size()), key,
+               guard, move, out.get());
         const std::vector<EnvelopeOut> device = out.download();
         const Culling modes[2] = {Culling::bbox3sigma, Culling::opacity_aware};
         for (std::size_t i = 0; i < g.size(); ++i)
             for (int m = 0; m < 2; ++m) {
-                const std::string what = std::string(culling_name(modes[m])) + ", gaussian " + std::to_string(i) + seed_note(seed);
-                EXPECT_TRUE(same_bits(device[i].bound[m], footprint_bound_px(g[i], modes[m], max_scale[i], std::max(key.fx, key.fy))))
+                const std::string what =
+                    std::string(culling_name(modes[m])) + ", gaussian " + std::to_string(i) + seed_note(seed);
+                EXPECT_TRUE(same_bits(device[i].bound[m],
+                                      footprint_bound_px(g[i], modes[m], max_scale[i], std::max(key.fx, key.fy))))
                     << what;
                 float bound = -1.0f;
                 const bool host = uncached_can_enter(g[i], modes[m], key, guard, move, max_scale[i], bound);

@@ -36,8 +36,9 @@ private:
         if (entry.holders == 0) {
             if (used_ + bytes > capacity_) {
                 scenes_.erase(scene);
-                throw OutOfMemoryError("CUDA error in cudaMalloc(&scene->positions) at device_buffer.hpp:48: "
-                                       "cudaErrorMemoryAllocation: out of memory");
+                throw OutOfMemoryError(
+                    "CUDA error in cudaMalloc(&scene->positions) at device_buffer.hpp:48: "
+                    "cudaErrorMemoryAllocation: out of memory");
             }
             used_ += bytes;
             entry.bytes = bytes;

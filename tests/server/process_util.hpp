@@ -126,7 +126,8 @@ inline int wait_for_port(const Child& server, std::chrono::milliseconds timeout 
     if (!server.wait_for_output("catgs-server: listening on port ", timeout)) return 0;
     const std::string out = server.output();
     int port = 0;
-    std::sscanf(out.c_str() + out.find("catgs-server: listening on port "), "catgs-server: listening on port %d", &port);
+    std::sscanf(out.c_str() + out.find("catgs-server: listening on port "), "catgs-server: listening on port %d",
+                &port);
     return port;
 }
 

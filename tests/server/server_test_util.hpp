@@ -81,7 +81,9 @@ inline v1::SessionConfig session_config(v1::Encoding encoding, int quality = 0, 
     return c;
 }
 
-inline v1::Pose pose_of(const Camera& camera) { return wire::to_proto(camera.pose); }
+inline v1::Pose pose_of(const Camera& camera) {
+    return wire::to_proto(camera.pose);
+}
 
 /// The shared test scene (generated once per process).
 inline std::shared_ptr<const Scene> test_scene() {
@@ -139,7 +141,9 @@ inline HealthStatus::ServingStatus health(int port, const std::string& service, 
 }
 
 /// The whole server reports SERVING on `port`.
-inline bool serving(int port) { return health(port, "") == HealthStatus::SERVING; }
+inline bool serving(int port) {
+    return health(port, "") == HealthStatus::SERVING;
+}
 
 /// A unary RenderService.Render request.
 inline v1::RenderRequest render_request(const v1::SessionConfig& config, const v1::FrameRequest& frame) {
@@ -240,15 +244,17 @@ inline ImageRGB8 decode_jpeg(const std::string& data) {
 
 inline ImageRGB8 decode_frame(const v1::Frame& frame) {
     switch (frame.encoding()) {
-    case v1::ENCODING_PNG: return decode_png(frame.data());
-    case v1::ENCODING_JPEG: return decode_jpeg(frame.data());
-    default: {
-        ImageRGB8 out;
-        out.width = static_cast<int>(frame.width());
-        out.height = static_cast<int>(frame.height());
-        out.rgb.assign(frame.data().begin(), frame.data().end());
-        return out;
-    }
+        case v1::ENCODING_PNG:
+            return decode_png(frame.data());
+        case v1::ENCODING_JPEG:
+            return decode_jpeg(frame.data());
+        default: {
+            ImageRGB8 out;
+            out.width = static_cast<int>(frame.width());
+            out.height = static_cast<int>(frame.height());
+            out.rgb.assign(frame.data().begin(), frame.data().end());
+            return out;
+        }
     }
 }
 

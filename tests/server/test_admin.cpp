@@ -27,8 +27,8 @@ TEST(ServerAdmin, HealthServesEveryService) {
 }
 
 /// grpc.reflection.v1alpha through a dynamic descriptor pool built from grpc-proto's
-/// reflection.proto (compiled to a descriptor set at build time): generated v1alpha classes would clash with the copies inside
-/// libgrpc++_reflection.so (the same message names registered twice abort at start-up).
+/// reflection.proto (compiled to a descriptor set at build time): generated v1alpha classes would clash with the copies
+/// inside libgrpc++_reflection.so (the same message names registered twice abort at start-up).
 TEST(ServerAdmin, ReflectionListsTheServices) {
     auto server = start_server();
     using namespace google::protobuf;
@@ -40,8 +40,7 @@ TEST(ServerAdmin, ReflectionListsTheServices) {
     DescriptorPool pool;
     for (const FileDescriptorProto& file : set.file()) ASSERT_NE(pool.BuildFile(file), nullptr) << file.name();
     const Descriptor* request_type = pool.FindMessageTypeByName("grpc.reflection.v1alpha.ServerReflectionRequest");
-    const Descriptor* response_type =
-        pool.FindMessageTypeByName("grpc.reflection.v1alpha.ServerReflectionResponse");
+    const Descriptor* response_type = pool.FindMessageTypeByName("grpc.reflection.v1alpha.ServerReflectionResponse");
     ASSERT_TRUE(request_type && response_type);
     DynamicMessageFactory factory(&pool);
     std::unique_ptr<Message> request(factory.GetPrototype(request_type)->New());

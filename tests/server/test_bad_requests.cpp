@@ -25,7 +25,6 @@ public:
     }
 
 protected:
-
     /// Opens a stream with `config` and expects it to fail with `code` and `message` in its text.
     static void expect_open_fails(const v1::SessionConfig& config, grpc::StatusCode code, const std::string& message) {
         StreamClient client(channel_to(server_->port()));
@@ -95,10 +94,12 @@ TEST_F(BadRequestTest, IntrinsicsThatDisagreeWithTheResolution) {
                       "open.intrinsics.cy: principal point -1 is outside the image height 0..90");
     k->set_cy(kHeight / 2.0);
     k->set_fx(0);
-    expect_open_fails(config, grpc::StatusCode::INVALID_ARGUMENT, "open.intrinsics.fx: 0 is not a positive focal length");
+    expect_open_fails(config, grpc::StatusCode::INVALID_ARGUMENT,
+                      "open.intrinsics.fx: 0 is not a positive focal length");
     k->set_fx(100);
     k->set_fy(kNaN);
-    expect_open_fails(config, grpc::StatusCode::INVALID_ARGUMENT, "open.intrinsics.fy: nan is not a positive focal length");
+    expect_open_fails(config, grpc::StatusCode::INVALID_ARGUMENT,
+                      "open.intrinsics.fy: nan is not a positive focal length");
 }
 
 TEST_F(BadRequestTest, BadEncodingAndPipelineOptions) {
@@ -179,8 +180,9 @@ TEST_F(BadRequestTest, BadFrameRequestsAnswerThatFrameAndKeepTheSession) {
     v1::Frame frame;
     ASSERT_TRUE(client.stream->Read(&frame));
     ASSERT_TRUE(frame.has_error());
-    EXPECT_NE(frame.error().message().find("frame.sequence: " + std::to_string(seq) + " is not greater than the previous"),
-              std::string::npos)
+    EXPECT_NE(
+        frame.error().message().find("frame.sequence: " + std::to_string(seq) + " is not greater than the previous"),
+        std::string::npos)
         << frame.error().message();
     EXPECT_EQ(frame.stats().frame_errors(), cases.size() + 1);
     EXPECT_TRUE(client.close().ok());
@@ -248,7 +250,7 @@ std::string unknown_value_message(const std::string& path, const EnumField& fiel
 /// enums: the first unknown value found is named with its full path.
 TEST(EnumValues, EveryEnumFieldOfEveryRequestIsChecked) {
     const std::vector<const pb::Descriptor*> requests = {
-        v1::StreamRequest::descriptor(),      v1::RenderRequest::descriptor(),   v1::LoadSceneRequest::descriptor(),
+        v1::StreamRequest::descriptor(),      v1::RenderRequest::descriptor(),      v1::LoadSceneRequest::descriptor(),
         v1::ListScenesRequest::descriptor(),  v1::UnloadSceneRequest::descriptor(), v1::GetSceneRequest::descriptor(),
         v1::ListScenesResponse::descriptor(),
     };
@@ -272,8 +274,8 @@ TEST(EnumValues, EveryEnumFieldOfEveryRequestIsChecked) {
     const std::vector<EnumField> config_fields = enum_fields(v1::SessionConfig::descriptor());
     std::vector<std::string> paths;
     for (const EnumField& f : config_fields) paths.push_back(f.path);
-    for (const char* expected : {"encoding.encoding", "encoding.jpeg_subsampling", "pipeline.cache", "pipeline.culling",
-                                 "pipeline.split"})
+    for (const char* expected :
+         {"encoding.encoding", "encoding.jpeg_subsampling", "pipeline.cache", "pipeline.culling", "pipeline.split"})
         EXPECT_NE(std::find(paths.begin(), paths.end(), expected), paths.end()) << expected;
     // Known values pass, whatever the field.
     v1::SessionConfig known = session_config(v1::ENCODING_PNG);
@@ -289,10 +291,11 @@ TEST_F(BadRequestTest, UnknownEnumValuesAreRefusedByEveryMethod) {
         SCOPED_TRACE(field.path);
         v1::SessionConfig config = session_config(v1::ENCODING_JPEG);
         spoil(config, field);
-        expect_open_fails(config, grpc::StatusCode::INVALID_ARGUMENT, unknown_value_message("open." + field.path, field));
+        expect_open_fails(config, grpc::StatusCode::INVALID_ARGUMENT,
+                          unknown_value_message("open." + field.path, field));
         v1::Frame frame;
-        const grpc::Status status =
-            render_once(channel_to(server_->port()), render_request(config, frame_request(1, uav_path(2)[0], 0)), &frame);
+        const grpc::Status status = render_once(channel_to(server_->port()),
+                                                render_request(config, frame_request(1, uav_path(2)[0], 0)), &frame);
         EXPECT_EQ(status.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
         EXPECT_NE(status.error_message().find(unknown_value_message("config." + field.path, field)), std::string::npos)
             << status.error_message();
@@ -336,7 +339,8 @@ TEST_F(BadRequestTest, UnaryRenderValidatesToo) {
     v1::Frame frame;
     const grpc::Status status = render_once(channel_to(server_->port()), request, &frame);
     EXPECT_EQ(status.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
-    EXPECT_NE(status.error_message().find("frame.pose.position: not finite"), std::string::npos) << status.error_message();
+    EXPECT_NE(status.error_message().find("frame.pose.position: not finite"), std::string::npos)
+        << status.error_message();
 }
 
 }  // namespace

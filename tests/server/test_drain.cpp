@@ -12,7 +12,9 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 
-double seconds_since(Clock::time_point t) { return std::chrono::duration<double>(Clock::now() - t).count(); }
+double seconds_since(Clock::time_point t) {
+    return std::chrono::duration<double>(Clock::now() - t).count();
+}
 
 /// The health listener's port, from the server's start-up log line.
 int health_port_of(const Child& server) {
@@ -30,8 +32,8 @@ bool is_shutdown_message(const grpc::Status& status) {
 
 TEST(ServerDrain, SigtermDrainsAsKubernetesExpects) {
     constexpr int kDrainMs = 3000 * kTimingSlack, kGraceMs = 2000 * kTimingSlack;
-    Child server({CATGS_SERVER_BINARY, "--address", "127.0.0.1:0", "--health-address", "127.0.0.1:0", "--backend", "cpu",
-                  "--scene", "city=builtin:city?gaussians=10000&seed=1", "--render-threads", "1", "--drain-ms",
+    Child server({CATGS_SERVER_BINARY, "--address", "127.0.0.1:0", "--health-address", "127.0.0.1:0", "--backend",
+                  "cpu", "--scene", "city=builtin:city?gaussians=10000&seed=1", "--render-threads", "1", "--drain-ms",
                   std::to_string(kDrainMs), "--shutdown-grace-ms", std::to_string(kGraceMs)});
     const int port = wait_for_port(server);
     ASSERT_GT(port, 0) << server.output();
@@ -94,8 +96,8 @@ TEST(ServerDrain, SigtermDrainsAsKubernetesExpects) {
     //    client reads anything, so what the client reads now was decided without its reading.
     EXPECT_TRUE(server.wait_for_output("cancelling 1 stream(s) whose client does not read", std::chrono::seconds(2)))
         << server.output();
-    EXPECT_TRUE(server.wait_for_output("session 2 closed: 14 'server is shutting down: reconnect",
-                                       std::chrono::seconds(2)))
+    EXPECT_TRUE(
+        server.wait_for_output("session 2 closed: 14 'server is shutting down: reconnect", std::chrono::seconds(2)))
         << server.output();
     const grpc::Status stuck_status = stuck->finish();
     EXPECT_TRUE(is_shutdown_message(stuck_status)) << stuck_status.error_code() << " " << stuck_status.error_message();
@@ -114,9 +116,8 @@ TEST(ServerDrain, SigtermDrainsAsKubernetesExpects) {
         EXPECT_TRUE(is_shutdown_message(late_status)) << late_status.error_code() << " " << late_status.error_message();
     }
     v1::Frame unary;
-    const grpc::Status unary_status =
-        render_once(channel_to(port), render_request(session_config(v1::ENCODING_PNG), frame_request(1, path[1], 0)),
-                    &unary);
+    const grpc::Status unary_status = render_once(
+        channel_to(port), render_request(session_config(v1::ENCODING_PNG), frame_request(1, path[1], 0)), &unary);
     EXPECT_TRUE(is_shutdown_message(unary_status)) << unary_status.error_code() << " " << unary_status.error_message();
     EXPECT_LT(seconds_since(sigterm), kDrainMs / 1000.0) << "the checks above ran past the drain";
 

@@ -330,8 +330,9 @@ TEST(ServerFaults, BurstOf200StreamOpensBeyondTheAdmissionLimit) {
             ADD_FAILURE() << "unexpected status " << out.status.error_code() << ": " << out.status.error_message();
         }
     }
-    std::printf("burst of %d opens: %d served, %d refused (max-sessions), %d unavailable; slowest %.2f s, all in %.2f s\n",
-                kClients, served, refused, unavailable, slowest, total);
+    std::printf(
+        "burst of %d opens: %d served, %d refused (max-sessions), %d unavailable; slowest %.2f s, all in %.2f s\n",
+        kClients, served, refused, unavailable, slowest, total);
     EXPECT_GE(served, 4);
     EXPECT_EQ(served + refused + unavailable, kClients);
     EXPECT_LT(slowest, 30.0) << "a stream hung";
@@ -346,8 +347,8 @@ TEST(ServerFaults, BurstOf200StreamOpensBeyondTheAdmissionLimit) {
 
 TEST(ServerFaults, ServerRestartedWhileTheClientReconnects) {
     const std::uint64_t seed = test_seed("ServerRestartedWhileTheClientReconnects");
-    const std::vector<std::string> server_flags = {"--backend", "cpu", "--scene", "city=builtin:city?gaussians=10000&seed=1",
-                                                   "--render-threads", "1"};
+    const std::vector<std::string> server_flags = {
+        "--backend", "cpu", "--scene", "city=builtin:city?gaussians=10000&seed=1", "--render-threads", "1"};
     auto start = [&](const std::string& address) {
         std::vector<std::string> argv = {CATGS_SERVER_BINARY, "--address", address};
         argv.insert(argv.end(), server_flags.begin(), server_flags.end());
@@ -357,10 +358,29 @@ TEST(ServerFaults, ServerRestartedWhileTheClientReconnects) {
     const int port = wait_for_port(*server);
     ASSERT_GT(port, 0) << server->output();
     constexpr int kPoses = 60;
-    Child client({CATGS_CLIENT_BINARY, "--server", "127.0.0.1:" + std::to_string(port), "--retries", "20",
-                  "--backoff-ms", "100", "--max-backoff-ms", "800", "--retry-seed", std::to_string(seed), "stream",
-                  "--scene", "city", "--trajectory", "builtin:hover?frames=" + std::to_string(kPoses), "--width", "160",
-                  "--height", "90", "--rate", "20", "--lock-step"});
+    Child client({CATGS_CLIENT_BINARY,
+                  "--server",
+                  "127.0.0.1:" + std::to_string(port),
+                  "--retries",
+                  "20",
+                  "--backoff-ms",
+                  "100",
+                  "--max-backoff-ms",
+                  "800",
+                  "--retry-seed",
+                  std::to_string(seed),
+                  "stream",
+                  "--scene",
+                  "city",
+                  "--trajectory",
+                  "builtin:hover?frames=" + std::to_string(kPoses),
+                  "--width",
+                  "160",
+                  "--height",
+                  "90",
+                  "--rate",
+                  "20",
+                  "--lock-step"});
     // Frames flow for a second (the client prints its first progress line)...
     ASSERT_TRUE(client.wait_for_output(" fps  latency p50", std::chrono::milliseconds(20000))) << client.output();
     ASSERT_TRUE(client.running()) << client.output();
@@ -481,8 +501,14 @@ TEST(ServerFaults, MalformedProtobufOnEveryMethod) {
     };
     // Always malformed: a length running past the end, wire types 6 and 7, a varint of 11
     // bytes, field number 0, an end-group without a start.
-    std::vector<std::string> garbage = {std::string("\x0a\x7f" "ab", 4), std::string("\x0e", 1), std::string("\x0f", 1),
-                                        std::string(11, '\xff'), std::string("\x00\x01", 2), std::string("\x0c", 1)};
+    std::vector<std::string> garbage = {std::string("\x0a\x7f"
+                                                    "ab",
+                                                    4),
+                                        std::string("\x0e", 1),
+                                        std::string("\x0f", 1),
+                                        std::string(11, '\xff'),
+                                        std::string("\x00\x01", 2),
+                                        std::string("\x0c", 1)};
     int random_cases = 0, random_parsed = 0;
     for (int i = 0; i < 12; ++i) {
         std::string bytes(1 + random() % 300, '\0');
@@ -516,8 +542,12 @@ TEST(ServerFaults, MalformedProtobufOnEveryMethod) {
     ASSERT_TRUE(open_message(session_config(v1::ENCODING_JPEG)).SerializeToString(&open));
     ASSERT_TRUE(frame_message(frame_request(1, uav_path(2)[0], 0)).SerializeToString(&frame));
     int responses = 0;
-    const grpc::Status status =
-        raw_call(channel, "/catgs.v1.RenderService/Stream", {open, frame, std::string("\x0a\x7f" "ab", 4)}, &responses);
+    const grpc::Status status = raw_call(channel, "/catgs.v1.RenderService/Stream",
+                                         {open, frame,
+                                          std::string("\x0a\x7f"
+                                                      "ab",
+                                                      4)},
+                                         &responses);
     EXPECT_EQ(status.error_code(), grpc::StatusCode::INVALID_ARGUMENT) << status.error_message();
     EXPECT_EQ(status.error_message(),
               "request: 4 bytes that are not a valid catgs.v1.StreamRequest message (malformed protobuf)");

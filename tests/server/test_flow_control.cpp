@@ -46,7 +46,8 @@ TEST_F(FlowControlTest, LatestPoseWinsWhenTheClientDoesNotAcknowledge) {
     std::this_thread::sleep_for(std::chrono::milliseconds(400));
     // ...then the credit is spent: the rest must wait, and only the newest survives.
     const auto coalesced_before = server_->stats().poses_coalesced;
-    for (int i = 2; i < kPoses; ++i) ASSERT_TRUE(client.send(frame_request(static_cast<std::uint64_t>(i + 1), path[i], 0)));
+    for (int i = 2; i < kPoses; ++i)
+        ASSERT_TRUE(client.send(frame_request(static_cast<std::uint64_t>(i + 1), path[i], 0)));
     ASSERT_TRUE(eventually([&] { return server_->stats().poses_coalesced - coalesced_before >= kPoses - 3; }));
     // Give the server time to (wrongly) render more than its credit.
     std::this_thread::sleep_for(std::chrono::milliseconds(300));
@@ -111,14 +112,14 @@ TEST_F(FlowControlTest, ClientThatNeverReadsKeepsServerMemoryBounded) {
     }
     const auto after = server_->stats();
     const long rss_after = rss_kb();
-    std::printf("never-reads: %llu poses sent; server sent %llu frames, coalesced %llu poses and %llu frames; "
-                "peak %lld frames per session, %lld bytes buffered; RSS +%ld kB\n",
-                static_cast<unsigned long long>(seq),
-                static_cast<unsigned long long>(after.frames_sent - before.frames_sent),
-                static_cast<unsigned long long>(after.poses_coalesced - before.poses_coalesced),
-                static_cast<unsigned long long>(after.frames_coalesced - before.frames_coalesced),
-                static_cast<long long>(after.peak_session_buffered), static_cast<long long>(max_buffered_bytes),
-                rss_after - rss_before);
+    std::printf(
+        "never-reads: %llu poses sent; server sent %llu frames, coalesced %llu poses and %llu frames; "
+        "peak %lld frames per session, %lld bytes buffered; RSS +%ld kB\n",
+        static_cast<unsigned long long>(seq), static_cast<unsigned long long>(after.frames_sent - before.frames_sent),
+        static_cast<unsigned long long>(after.poses_coalesced - before.poses_coalesced),
+        static_cast<unsigned long long>(after.frames_coalesced - before.frames_coalesced),
+        static_cast<long long>(after.peak_session_buffered), static_cast<long long>(max_buffered_bytes),
+        rss_after - rss_before);
     // One frame in gRPC's hands plus one waiting, per session, never more.
     EXPECT_LE(after.peak_session_buffered, 2);
     // Two sessions (this and the healthy one), at most two frames each.

@@ -59,8 +59,8 @@ protected:
             server::FrameSetup parsed;
             ASSERT_TRUE(server::parse_frame_request(request, setup.intrinsics, "frame", &parsed).ok());
             ImageRGB8 expected;
-            const FrameStats stats = reference->render_rgb8(parsed.camera, setup.options, expected,
-                                                            parsed.hints ? &*parsed.hints : nullptr);
+            const FrameStats stats =
+                reference->render_rgb8(parsed.camera, setup.options, expected, parsed.hints ? &*parsed.hints : nullptr);
             EXPECT_EQ(stats.key_frame, frame.cache().key_frame()) << "frame " << i;
             const ImageRGB8 got = decode_frame(frame);
             ASSERT_EQ(got.width, kWidth);
@@ -75,7 +75,8 @@ protected:
         }
         EXPECT_TRUE(client.close().ok());
         if (!exact) std::printf("JPEG worst PSNR %.2f dB\n", worst_psnr);
-        if (setup.options.catgs.cache != CacheMode::off) std::printf("%d of %d frames from the cache\n", cached_frames, kFrames);
+        if (setup.options.catgs.cache != CacheMode::off)
+            std::printf("%d of %d frames from the cache\n", cached_frames, kFrames);
     }
 };
 
@@ -127,7 +128,7 @@ TEST_F(FramesTest, RepeatedPoseResendsTheLastFrameUnrendered) {
         bool reused;  // expected
     };
     const std::vector<Step> requests = {{0, false, false}, {0, false, true}, {0, false, true},
-                                        {1, false, false}, {1, true, false},  {1, true, true}};
+                                        {1, false, false}, {1, true, false}, {1, true, true}};
     std::vector<v1::Frame> frames;
     std::uint64_t ack = 0;
     for (std::size_t i = 0; i < requests.size(); ++i) {

@@ -78,8 +78,8 @@ TEST(ServerLimits, PoseRateLimitSlowsAFastClientDown) {
     });
     const auto begin = std::chrono::steady_clock::now();
     for (int i = 1; i <= kRequests; ++i)
-        ASSERT_TRUE(client.send(frame_request(static_cast<std::uint64_t>(i), path[static_cast<std::size_t>(i - 1)],
-                                              last_sequence)));
+        ASSERT_TRUE(client.send(
+            frame_request(static_cast<std::uint64_t>(i), path[static_cast<std::size_t>(i - 1)], last_sequence)));
     client.stream->WritesDone();
     reader.join();
     const grpc::Status status = client.stream->Finish();
@@ -231,7 +231,8 @@ TEST(ServerLimits, AStreamWithoutItsOpeningMessageIsFinishedAfterTheOpenTimeout)
 TEST(ServerLimits, UnaryRendersReuseRenderers) {
     auto server = start_server();
     auto stub = v1::RenderService::NewStub(channel_to(server->port()));
-    const v1::RenderRequest request = render_request(session_config(v1::ENCODING_PNG), frame_request(1, uav_path(4)[1], 0));
+    const v1::RenderRequest request =
+        render_request(session_config(v1::ENCODING_PNG), frame_request(1, uav_path(4)[1], 0));
     std::string first;
     for (int i = 0; i < 4; ++i) {
         grpc::ClientContext context;

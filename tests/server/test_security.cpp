@@ -186,7 +186,8 @@ TEST_F(TlsTest, TokensOnEveryMethodHealthWithoutToken) {
             results.emplace_back("GetScene", scenes->GetScene(c.get(), request, &info));
         }
         for (const auto& [method, status] : results) {
-            EXPECT_EQ(status.error_code(), grpc::StatusCode::UNAUTHENTICATED) << method << ": " << status.error_message();
+            EXPECT_EQ(status.error_code(), grpc::StatusCode::UNAUTHENTICATED)
+                << method << ": " << status.error_message();
             EXPECT_EQ(status.error_message(), h.message) << method;
         }
     }
@@ -230,7 +231,8 @@ TEST_F(TlsTest, TokensOnEveryMethodHealthWithoutToken) {
         grpc::ClientContext c;
         c.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(10));
         grpc::ByteBuffer request, response;
-        auto call = stub.PrepareUnaryCall(&c, "/grpc.reflection.v1alpha.ServerReflection/ServerReflectionInfo", request, &cq);
+        auto call =
+            stub.PrepareUnaryCall(&c, "/grpc.reflection.v1alpha.ServerReflection/ServerReflectionInfo", request, &cq);
         call->StartCall();
         grpc::Status s;
         call->Finish(&response, &s, reinterpret_cast<void*>(1));
@@ -274,8 +276,9 @@ TEST_F(TlsTest, BinariesWithMutualTlsAndToken) {
         const auto code = child->wait(std::chrono::seconds(30));
         return std::make_pair(code.value_or(-1), child->output());
     };
-    const std::vector<std::string> tls = {"--tls-ca", cert("ca.crt").string(), "--tls-cert", cert("client.crt").string(),
-                                          "--tls-key", cert("client.key").string()};
+    const std::vector<std::string> tls = {"--tls-ca",   cert("ca.crt").string(),
+                                          "--tls-cert", cert("client.crt").string(),
+                                          "--tls-key",  cert("client.key").string()};
     std::vector<std::string> ok = tls;
     ok.insert(ok.end(), {"--token-file", token.string(), "--session-id", "viewer-7"});
     auto [code, out] = client(ok);
@@ -365,8 +368,11 @@ TEST_F(ScenePathTest, WaysOutOfTheRootAreRefused) {
 }
 
 TEST_F(ScenePathTest, SpellingsInsideTheRootAreAccepted) {
-    for (const auto& [source, id] : std::vector<std::pair<std::string, std::string>>{
-             {"small.ply", "a"}, {"./small.ply", "b"}, {"sub/../small.ply", "c"}, {"sub/in.ply", "d"}, {"sub//in.ply", "e"}}) {
+    for (const auto& [source, id] : std::vector<std::pair<std::string, std::string>>{{"small.ply", "a"},
+                                                                                     {"./small.ply", "b"},
+                                                                                     {"sub/../small.ply", "c"},
+                                                                                     {"sub/in.ply", "d"},
+                                                                                     {"sub//in.ply", "e"}}) {
         SCOPED_TRACE(source);
         const grpc::Status status = load(source, id);
         EXPECT_TRUE(status.ok()) << status.error_message();

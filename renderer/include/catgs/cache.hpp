@@ -26,10 +26,10 @@
 namespace catgs {
 
 enum class CacheMode {
-    off,          ///< every frame runs the full pipeline
-    speculative,  ///< CaT-GS: key frames preprocess the whole window, frames in it reuse lists
-    unspeculated, ///< reuse the key frame's lists with no speculation and no envelope check:
-                  ///< only to demonstrate the stripe artifacts speculation removes
+    off,           ///< every frame runs the full pipeline
+    speculative,   ///< CaT-GS: key frames preprocess the whole window, frames in it reuse lists
+    unspeculated,  ///< reuse the key frame's lists with no speculation and no envelope check:
+                   ///< only to demonstrate the stripe artifacts speculation removes
 };
 
 struct CatgsOptions {
@@ -59,9 +59,9 @@ struct CatgsOptions {
 
     /// Whether a cached frame may re-sort, so a key frame must keep its pairs in emission order.
     bool cached_frames_may_resort() const { return resort_cached || std::isfinite(reuse_order_max_angle); }
-    int window = 4;              ///< initial (adaptive) or fixed W, 1..16
+    int window = 4;  ///< initial (adaptive) or fixed W, 1..16
     bool adaptive_window = true;
-    double guard_px = 2.0;       ///< footprint dilation and envelope radius, pixels
+    double guard_px = 2.0;            ///< footprint dilation and envelope radius, pixels
     double guard_translation = 0.25;  ///< envelope radius in metres (also lowers the near plane)
     /// Screen motion (pixels) a window may span before W shrinks: one tile.
     double window_motion_budget_px = 16.0;
@@ -110,11 +110,11 @@ double screen_motion_bound(const Camera& a, const Camera& b, double min_depth, d
 
 /// What a backend reports about the key frame it rendered.
 struct KeyFrameSummary {
-    double min_depth = 0;       ///< nearest depth of a cached Gaussian over the window's poses
+    double min_depth = 0;  ///< nearest depth of a cached Gaussian over the window's poses
     /// Mean of 1/depth over the visible Gaussians at the key pose: screen motion from
     /// translation is proportional to 1/depth, so this is the typical motion factor.
     double mean_inverse_depth = 0;
-    double max_extent_px = 0;   ///< largest cached footprint half-extent (full-screen ones excluded)
+    double max_extent_px = 0;  ///< largest cached footprint half-extent (full-screen ones excluded)
 };
 
 /// Decides key and cached frames for one stream.

@@ -17,7 +17,7 @@ struct Intrinsics {
 /// World-to-camera rigid transform, in double: the world may be UTM-sized.
 struct Pose {
     std::array<double, 9> rotation{1, 0, 0, 0, 1, 0, 0, 0, 1};  ///< row-major R
-    std::array<double, 3> translation{0, 0, 0};                  ///< t
+    std::array<double, 3> translation{0, 0, 0};                 ///< t
 };
 
 struct Camera {

@@ -52,7 +52,9 @@ inline constexpr double kMaxShColour = 1e4;
 inline constexpr int kMaxShDegree = 3;
 
 /// Number of SH coefficients per colour channel for a degree.
-CATGS_HD constexpr int sh_coefficient_count(int degree) { return (degree + 1) * (degree + 1); }
+CATGS_HD constexpr int sh_coefficient_count(int degree) {
+    return (degree + 1) * (degree + 1);
+}
 
 /// Graphdeco's 3-sigma radius uses max(0.1, mid^2 - det) under the square root so that a
 /// circular 2D Gaussian still gets a well-defined eigenvalue spread.

@@ -66,8 +66,8 @@ private:
     struct Window {
         std::vector<View<T>> views;  // pose 0 is the actual (key) pose
         T guard = T(0);
-        T guard_translation = T(0);   // envelope radius in metres (speculation)
-        T near_plane = T(0);          // lowered by the translation guard for speculation
+        T guard_translation = T(0);  // envelope radius in metres (speculation)
+        T near_plane = T(0);         // lowered by the translation guard for speculation
     };
     void chunk_cull(const Scene& scene, const Window& window, bool cull_chunks);
     void preprocess(const Scene& scene, const View<T>& actual, const Window& window, Culling culling);
@@ -88,26 +88,26 @@ private:
 
     int threads_;
     FramePlanner planner_;
-    std::uint32_t split_k_ = 0;                   // k of the current task list
+    std::uint32_t split_k_ = 0;                              // k of the current task list
     std::vector<std::pair<std::size_t, std::size_t>> runs_;  // chunk_cull: [begin, end) of Gaussians to preprocess
-    std::uint64_t chunks_culled_ = 0;             // chunk_cull: chunks the key frame skipped
-    double window_min_depth_ = 0;                 // preprocess: nearest depth at any pose of the window
-    double uncached_bound_px_ = 0;                // preprocess: footprint bound of uncached Gaussians near the image
-    std::uint64_t rendered_pairs_ = 0;            // ranges: pairs the tiles' lists hold
-    std::vector<Projected<T>> projected_;         // preprocess: at the actual pose; opacity 0 = culled
-    std::vector<std::uint32_t> tiles_touched_;    // preprocess: union tile count, 0 = not cached
-    std::vector<float> sort_depth_;               // preprocess: depth the keys sort by
-    std::vector<std::uint64_t> offsets_;          // keys: exclusive scan of tiles_touched_
-    std::vector<std::uint64_t> keys_;             // keys, then sorted
-    std::vector<std::uint32_t> values_;           // Gaussian index per key
-    std::vector<std::uint64_t> emitted_keys_;     // keys: a key frame's pairs in emission order (rekey)
+    std::uint64_t chunks_culled_ = 0;                        // chunk_cull: chunks the key frame skipped
+    double window_min_depth_ = 0;                            // preprocess: nearest depth at any pose of the window
+    double uncached_bound_px_ = 0;              // preprocess: footprint bound of uncached Gaussians near the image
+    std::uint64_t rendered_pairs_ = 0;          // ranges: pairs the tiles' lists hold
+    std::vector<Projected<T>> projected_;       // preprocess: at the actual pose; opacity 0 = culled
+    std::vector<std::uint32_t> tiles_touched_;  // preprocess: union tile count, 0 = not cached
+    std::vector<float> sort_depth_;             // preprocess: depth the keys sort by
+    std::vector<std::uint64_t> offsets_;        // keys: exclusive scan of tiles_touched_
+    std::vector<std::uint64_t> keys_;           // keys, then sorted
+    std::vector<std::uint32_t> values_;         // Gaussian index per key
+    std::vector<std::uint64_t> emitted_keys_;   // keys: a key frame's pairs in emission order (rekey)
     std::vector<std::uint32_t> emitted_values_;
-    std::vector<std::uint64_t> sort_keys_tmp_;    // sort: ping-pong buffers
+    std::vector<std::uint64_t> sort_keys_tmp_;  // sort: ping-pong buffers
     std::vector<std::uint32_t> sort_values_tmp_;
-    std::vector<TileRange> ranges_;               // tile ranges
-    std::vector<TileTask> tasks_;                 // split: tiles, then extra sub-tasks
-    std::vector<std::uint32_t> split_slot_;       // split: first partial slot of a split tile, or kNoSlot
-    std::vector<Partial<T>> partials_;            // rasterize: per slot, 256 pixels of (R, A)
+    std::vector<TileRange> ranges_;          // tile ranges
+    std::vector<TileTask> tasks_;            // split: tiles, then extra sub-tasks
+    std::vector<std::uint32_t> split_slot_;  // split: first partial slot of a split tile, or kNoSlot
+    std::vector<Partial<T>> partials_;       // rasterize: per slot, 256 pixels of (R, A)
 };
 
 extern template class CpuRenderer<float>;

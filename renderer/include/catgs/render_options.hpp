@@ -72,18 +72,18 @@ std::optional<double> parse_degrees(const std::string& text);
 
 /// Wall time per stage (milliseconds) and work counts of one frame.
 struct FrameStats {
-    std::uint64_t visible = 0;  ///< Gaussians that passed preprocess
-    std::uint64_t pairs = 0;    ///< tile-Gaussian pairs emitted (render length)
-    std::uint64_t chunks = 0;   ///< the scene's chunks (1 per kChunkGaussians; 0 if unpartitioned)
+    std::uint64_t visible = 0;        ///< Gaussians that passed preprocess
+    std::uint64_t pairs = 0;          ///< tile-Gaussian pairs emitted (render length)
+    std::uint64_t chunks = 0;         ///< the scene's chunks (1 per kChunkGaussians; 0 if unpartitioned)
     std::uint64_t chunks_culled = 0;  ///< chunks a key frame skipped whole (cached frames: the key's)
-    std::uint64_t arena_bytes = 0;  ///< device memory held by the renderer's arenas (GPU)
-    int bands = 1;              ///< horizontal bands the frame was rendered in (GPU overflow path)
-    bool key_frame = true;      ///< false: drawn from the inter-frame cache
-    int window = 1;             ///< W of the window this frame belongs to
-    bool order_reused = false;  ///< cached frame drawn in the key frame's depth order (not re-sorted)
-    std::uint64_t tasks = 0;    ///< rasterizer tasks: tiles plus extra split sub-tasks
-    std::uint64_t split_tasks = 0;  ///< extra sub-tasks from splitting
-    std::uint32_t split_k = 0;  ///< the k used this frame (0: no splitting)
+    std::uint64_t arena_bytes = 0;    ///< device memory held by the renderer's arenas (GPU)
+    int bands = 1;                    ///< horizontal bands the frame was rendered in (GPU overflow path)
+    bool key_frame = true;            ///< false: drawn from the inter-frame cache
+    int window = 1;                   ///< W of the window this frame belongs to
+    bool order_reused = false;        ///< cached frame drawn in the key frame's depth order (not re-sorted)
+    std::uint64_t tasks = 0;          ///< rasterizer tasks: tiles plus extra split sub-tasks
+    std::uint64_t split_tasks = 0;    ///< extra sub-tasks from splitting
+    std::uint32_t split_k = 0;        ///< the k used this frame (0: no splitting)
     /// Wall time of each stage (stage.hpp). The CPU backend folds scan into keys and has no
     /// copy_out; encode is the server's.
     StageTimes stage_ms;

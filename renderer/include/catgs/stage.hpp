@@ -32,17 +32,28 @@ inline constexpr std::array<Stage, kStageCount> kStages{
 
 constexpr std::string_view stage_name(Stage stage) {
     switch (stage) {
-        case Stage::chunk_cull: return "chunk_cull";
-        case Stage::preprocess: return "preprocess";
-        case Stage::scan: return "scan";
-        case Stage::keys: return "keys";
-        case Stage::sort: return "sort";
-        case Stage::ranges: return "ranges";
-        case Stage::split: return "split";
-        case Stage::rasterize: return "rasterize";
-        case Stage::merge: return "merge";
-        case Stage::copy_out: return "copy_out";
-        case Stage::encode: return "encode";
+        case Stage::chunk_cull:
+            return "chunk_cull";
+        case Stage::preprocess:
+            return "preprocess";
+        case Stage::scan:
+            return "scan";
+        case Stage::keys:
+            return "keys";
+        case Stage::sort:
+            return "sort";
+        case Stage::ranges:
+            return "ranges";
+        case Stage::split:
+            return "split";
+        case Stage::rasterize:
+            return "rasterize";
+        case Stage::merge:
+            return "merge";
+        case Stage::copy_out:
+            return "copy_out";
+        case Stage::encode:
+            return "encode";
     }
     return "unknown";
 }

@@ -32,7 +32,8 @@ CATGS_HD bool uncached_can_enter(const Projected<T>& g, Culling mode, const View
     // first order no longer holds.
     if (!in_clamp_region(key, g.mean)) return false;
     bound = footprint_bound_px(g, mode, max_scale, focal);
-    const T reach = guard * (T(1) + bound / focal) + focal * kappa * guard_translation / z + bound * (T(1) + guard_translation / z);
+    const T reach =
+        guard * (T(1) + bound / focal) + focal * kappa * guard_translation / z + bound * (T(1) + guard_translation / z);
     T away = -g.mean.x > g.mean.x - w ? -g.mean.x : g.mean.x - w;
     away = -g.mean.y > away ? -g.mean.y : away;
     away = g.mean.y - h > away ? g.mean.y - h : away;
@@ -45,7 +46,8 @@ CATGS_HD bool uncached_can_enter(const Projected<T>& g, Culling mode, const View
 /// only the tiles the ellipse touches, e.g. the diagonal ones of a thin diagonal ellipse.
 template <typename T>
 CATGS_HD bool cached_can_gain_tiles(Culling mode, std::uint32_t tiles, const View<T>& key) {
-    return mode != Culling::exact && tiles < static_cast<std::uint32_t>(key.tiles_x) * static_cast<std::uint32_t>(key.tiles_y);
+    return mode != Culling::exact &&
+           tiles < static_cast<std::uint32_t>(key.tiles_x) * static_cast<std::uint32_t>(key.tiles_y);
 }
 
 /// Key-frame summary: the half-extent (pixels) a cached Gaussian that can gain tiles, seen at

@@ -25,11 +25,15 @@ CATGS_INLINE std::uint64_t make_sort_key(std::uint32_t tile, float depth) {
     return (static_cast<std::uint64_t>(tile) << kSortKeyDepthBits) | bits;
 }
 
-CATGS_INLINE std::uint32_t key_tile(std::uint64_t key) { return static_cast<std::uint32_t>(key >> kSortKeyDepthBits); }
+CATGS_INLINE std::uint32_t key_tile(std::uint64_t key) {
+    return static_cast<std::uint32_t>(key >> kSortKeyDepthBits);
+}
 
 /// Cached frames park the pairs the current pose does not need at tile id `tiles`: past every
 /// real tile, so they sort last and no range covers them (sort_key_tile_bits counts it).
-CATGS_INLINE std::uint32_t parked_tile(std::uint32_t tiles) { return tiles; }
+CATGS_INLINE std::uint32_t parked_tile(std::uint32_t tiles) {
+    return tiles;
+}
 
 /// How many bits the tile half of a key needs on a grid of `tiles` tiles: ids run over
 /// 0..tiles, the parked tile included, so the bit width of `tiles`. A sort need only look at

@@ -35,7 +35,7 @@ struct GaussianRef {
     const float* scale;     ///< 3
     const float* rotation;  ///< 4, (w, x, y, z), unit
     float opacity;
-    const float* sh;        ///< sh_coefficient_count(degree) RGB triples
+    const float* sh;  ///< sh_coefficient_count(degree) RGB triples
     int sh_degree;
 };
 
@@ -101,7 +101,7 @@ CATGS_HD bool project_geometry(const GaussianRef& g, const View<T>& view, Projec
     const Vec3<T> cross{m0.y * m1.z - m0.z * m1.y, m0.z * m1.x - m0.x * m1.z, m0.x * m1.y - m0.y * m1.x};
     const T blur = static_cast<T>(kCovarianceBlur) * inv_k * inv_k;
     const T sxx = dot(m0, m0) + blur, sxy = dot(m0, m1), syy = dot(m1, m1) + blur;  // Sigma' / k^2
-    const T det = dot(cross, cross) + blur * (sxx + syy - blur);                      // det Sigma' / k^4
+    const T det = dot(cross, cross) + blur * (sxx + syy - blur);                    // det Sigma' / k^4
     if (!(det > T(0)) || !is_finite(det)) return false;
     const T inv_det = inv_k * inv_k / det;  // k^2 / det Sigma'
 

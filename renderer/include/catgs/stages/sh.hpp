@@ -37,8 +37,8 @@ CATGS_HD Vec3<T> sh_colour(const float* coefficients, int degree, Vec3<T> dir) {
         if (degree > 1) {
             const T xx = x * x, yy = y * y, zz = z * z, xy = x * y, yz = y * z, xz = x * z;
             c = c + (static_cast<T>(kShC2a) * xy) * coeff(4) + (static_cast<T>(-kShC2a) * yz) * coeff(5) +
-                (static_cast<T>(kShC2b) * (2 * zz - xx - yy)) * coeff(6) +
-                (static_cast<T>(-kShC2a) * xz) * coeff(7) + (static_cast<T>(kShC2c) * (xx - yy)) * coeff(8);
+                (static_cast<T>(kShC2b) * (2 * zz - xx - yy)) * coeff(6) + (static_cast<T>(-kShC2a) * xz) * coeff(7) +
+                (static_cast<T>(kShC2c) * (xx - yy)) * coeff(8);
             if (degree > 2) {
                 c = c + (static_cast<T>(-kShC3a) * y * (3 * xx - yy)) * coeff(9) +
                     (static_cast<T>(kShC3b) * xy * z) * coeff(10) +

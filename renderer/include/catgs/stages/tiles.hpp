@@ -146,7 +146,8 @@ CATGS_HD std::uint32_t for_each_window_tile(const Projected<T>* poses, std::uint
     TileRect rects[MaxWindow];
     TileRect u{view.tiles_x, view.tiles_y, 0, 0};
     for (int k = 0; k < window; ++k) {
-        rects[k] = (valid >> k & 1u) ? tile_rect(poses[k], mode, view.tiles_x, view.tiles_y, guard) : TileRect{0, 0, 0, 0};
+        rects[k] =
+            (valid >> k & 1u) ? tile_rect(poses[k], mode, view.tiles_x, view.tiles_y, guard) : TileRect{0, 0, 0, 0};
         if (rects[k].empty()) continue;
         u.x0 = rects[k].x0 < u.x0 ? rects[k].x0 : u.x0;
         u.y0 = rects[k].y0 < u.y0 ? rects[k].y0 : u.y0;
@@ -160,7 +161,8 @@ CATGS_HD std::uint32_t for_each_window_tile(const Projected<T>* poses, std::uint
     for (int ty = u.y0; ty < u.y1; ++ty)
         for (int tx = u.x0; tx < u.x1; ++tx) {
             bool hit = false;
-            for (int k = 0; k < window && !hit; ++k) hit = footprint_in_tile(poses[k], mode, rects[k], tx, ty, view, guard);
+            for (int k = 0; k < window && !hit; ++k)
+                hit = footprint_in_tile(poses[k], mode, rects[k], tx, ty, view, guard);
             if (!hit) continue;
             emit(static_cast<std::uint32_t>(ty * view.tiles_x + tx));
             ++n;

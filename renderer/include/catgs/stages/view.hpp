@@ -34,7 +34,9 @@ struct View {
     double depth_offset;
 };
 
-inline int tiles_for(int pixels) { return (pixels + kTileSize - 1) / kTileSize; }
+inline int tiles_for(int pixels) {
+    return (pixels + kTileSize - 1) / kTileSize;
+}
 
 /// The Jacobian clamp region reaches this fraction of the image size past each image edge:
 /// each side's clamp adds (kJacobianClampFactor - 1) = 0.3 of the half-width tangent, i.e.

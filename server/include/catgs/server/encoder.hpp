@@ -13,8 +13,8 @@ enum class Format { jpeg, png, raw_rgb8 };
 
 struct EncodeSettings {
     Format format = Format::jpeg;
-    int jpeg_quality = 85;   ///< 1..100
-    bool jpeg_444 = false;   ///< 4:4:4 chroma instead of 4:2:0
+    int jpeg_quality = 85;  ///< 1..100
+    bool jpeg_444 = false;  ///< 4:4:4 chroma instead of 4:2:0
 };
 
 /// Encodes `image` into `out` (replacing its contents). Throws catgs::Error on failure.

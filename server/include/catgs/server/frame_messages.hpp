@@ -37,8 +37,7 @@ v1::Frame rendered_frame(const FrameSetup& request, Format format, const ImageRG
                          const RenderTimes& times);
 /// Encodes `image` into frame.data and sets the encode and total times. When the encoder
 /// fails, frame.data is empty and the status is INTERNAL "encoding failed: ...".
-grpc::Status encode_frame(const ImageRGB8& image, const EncodeSettings& settings, TimePoint received,
-                          v1::Frame& frame);
+grpc::Status encode_frame(const ImageRGB8& image, const EncodeSettings& settings, TimePoint received, v1::Frame& frame);
 /// A repeated pose answered with `data`, the last frame's bytes (a session's size and encoding
 /// are fixed, so the same pose is the same frame): marked reused_previous, never rendered.
 v1::Frame resent_frame(const FrameSetup& request, Format format, const Intrinsics& intrinsics, TimePoint received,

@@ -33,9 +33,9 @@ struct ServerOptions {
     std::vector<std::string> preload{"city=builtin:city?gaussians=200000&seed=1"};
     std::string backend = "cpu";
     std::string precision = "float";
-    int render_threads = 0;   ///< CPU backend threads per render (0: all cores)
-    int render_workers = 2;   ///< sessions rendering at once
-    int encode_workers = 2;   ///< encoder threads
+    int render_threads = 0;  ///< CPU backend threads per render (0: all cores)
+    int render_workers = 2;  ///< sessions rendering at once
+    int encode_workers = 2;  ///< encoder threads
     Limits limits;
     std::string tls_cert_file, tls_key_file, tls_client_ca_file;
     std::string bearer_token;  ///< empty: no token required
@@ -56,20 +56,20 @@ struct ServerOptions {
 /// Server-wide counters; gauges are current values, the rest totals.
 struct ServerStats {
     std::uint64_t sessions_opened = 0;
-    int sessions_active = 0;               ///< admitted sessions (gauge)
-    int streams_open = 0;                  ///< Stream reactors alive, admitted or not (gauge)
+    int sessions_active = 0;  ///< admitted sessions (gauge)
+    int streams_open = 0;     ///< Stream reactors alive, admitted or not (gauge)
     std::uint64_t frames_sent = 0;
     std::uint64_t poses_coalesced = 0;
     std::uint64_t frames_coalesced = 0;
     std::uint64_t frame_errors = 0;
-    std::int64_t frames_buffered = 0;      ///< encoded frames held by all sessions' output slots (gauge)
-    std::int64_t bytes_buffered = 0;       ///< their bytes (gauge)
+    std::int64_t frames_buffered = 0;        ///< encoded frames held by all sessions' output slots (gauge)
+    std::int64_t bytes_buffered = 0;         ///< their bytes (gauge)
     std::int64_t peak_session_buffered = 0;  ///< most frames one session ever held at once
-    std::uint64_t streams_stalled = 0;     ///< streams cancelled by the stall watchdog
-    std::uint64_t open_timeouts = 0;       ///< streams finished for sending no opening message in time
-    std::uint64_t reads_delayed = 0;       ///< reads postponed by the pose-rate limit
-    std::uint64_t out_of_memory = 0;       ///< sessions and loads refused for memory
-    int pooled_renderers = 0;              ///< idle renderers kept for unary renders (gauge)
+    std::uint64_t streams_stalled = 0;       ///< streams cancelled by the stall watchdog
+    std::uint64_t open_timeouts = 0;         ///< streams finished for sending no opening message in time
+    std::uint64_t reads_delayed = 0;         ///< reads postponed by the pose-rate limit
+    std::uint64_t out_of_memory = 0;         ///< sessions and loads refused for memory
+    int pooled_renderers = 0;                ///< idle renderers kept for unary renders (gauge)
 };
 
 class StreamSession;

@@ -9,10 +9,11 @@
 
 namespace catgs::server {
 
-using RenderServiceBase =
-    v1::RenderService::WithRawCallbackMethod_Stream<v1::RenderService::WithRawCallbackMethod_Render<v1::RenderService::Service>>;
-using SceneServiceBase = v1::SceneService::WithRawCallbackMethod_LoadScene<v1::SceneService::WithRawCallbackMethod_ListScenes<
-    v1::SceneService::WithRawCallbackMethod_UnloadScene<v1::SceneService::WithRawCallbackMethod_GetScene<v1::SceneService::Service>>>>;
+using RenderServiceBase = v1::RenderService::WithRawCallbackMethod_Stream<
+    v1::RenderService::WithRawCallbackMethod_Render<v1::RenderService::Service>>;
+using SceneServiceBase = v1::SceneService::WithRawCallbackMethod_LoadScene<
+    v1::SceneService::WithRawCallbackMethod_ListScenes<v1::SceneService::WithRawCallbackMethod_UnloadScene<
+        v1::SceneService::WithRawCallbackMethod_GetScene<v1::SceneService::Service>>>>;
 
 class RenderServiceImpl final : public RenderServiceBase {
 public:

@@ -115,8 +115,8 @@ private:
     void handle_open(const v1::SessionConfig& config);
     /// `enum_values`: check_enum_values of the whole StreamRequest.
     void handle_frame(const v1::FrameRequest& request, const grpc::Status& enum_values);
-    void initialise();   // render pool: make the renderer
-    void render_next();  // render pool: render the newest pose
+    void initialise();              // render pool: make the renderer
+    void render_next();             // render pool: render the newest pose
     void render(PendingPose pose);  // render pool: render_next's render and the encode it posts
     /// Encoder or render pool: queues an image frame (or its encoding error) for writing;
     /// `view` is the pose it shows.
@@ -177,15 +177,15 @@ private:
     std::uint64_t last_request_sequence_ = 0;
     std::uint64_t last_ack_ = 0;
     std::deque<std::uint64_t> unacked_;  // frames rendered (or rendering) and not acknowledged
-    bool reads_done_ = false;   // the client half-closed (or the call broke)
-    bool render_busy_ = false;  // a render task is queued or running
-    int encoding_ = 0;          // frames being rendered for encoding, or encoded
+    bool reads_done_ = false;            // the client half-closed (or the call broke)
+    bool render_busy_ = false;           // a render task is queued or running
+    int encoding_ = 0;                   // frames being rendered for encoding, or encoded
 
     Clock::time_point write_started_;
-    v1::Frame in_flight_;                 // chosen for writing; cleared once serialized
-    grpc::ByteBuffer in_flight_buffer_;   // owned by gRPC between StartWrite and OnWriteDone
+    v1::Frame in_flight_;                // chosen for writing; cleared once serialized
+    grpc::ByteBuffer in_flight_buffer_;  // owned by gRPC between StartWrite and OnWriteDone
     std::int64_t in_flight_bytes_ = 0;
-    std::optional<v1::Frame> next_image_; // latest wins
+    std::optional<v1::Frame> next_image_;  // latest wins
     // The view of next_image_ and of in_flight_, and the last image written with its bytes
     // (moved out of the written message, not copied). A request for exactly that pose, bit
     // for bit (a hovering drone, a paused viewer), is answered with those bytes unrendered.
