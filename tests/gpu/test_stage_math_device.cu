@@ -73,7 +73,8 @@ private:
 template <typename Kernel, typename... Args>
 void launch(std::size_t n, const char* what, Kernel kernel, Args... args) {
     const unsigned blocks = static_cast<unsigned>((n + 127) / 128);
-    kernel < < <blocks> 0 ? blocks : 1, 128 >>> (args...);
+    const unsigned grid = blocks > 0 ? blocks : 1;
+    kernel<<<grid, 128>>>(args...);
     check_cuda(cudaGetLastError(), what);
     check_cuda(cudaDeviceSynchronize(), what);
 }
