@@ -127,8 +127,9 @@ void ServerCore::watchdog() {
         lock.unlock();
         const auto now = std::chrono::steady_clock::now();
         for (const auto& session : streams()) {
-            if (stall.count() > 0 && session->cancel_if_stalled(now, stall)) counters_.streams_stalled++;
-            if (open.count() > 0 && session->finish_if_not_opened(now, open)) counters_.open_timeouts++;
+            // Each counts itself (ServerStats) before its status reaches the client.
+            if (stall.count() > 0) session->cancel_if_stalled(now, stall);
+            if (open.count() > 0) session->finish_if_not_opened(now, open);
         }
         lock.lock();
     }

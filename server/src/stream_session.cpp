@@ -207,6 +207,8 @@ bool StreamSession::cancel_if_stalled(Clock::time_point now, std::chrono::millis
         "session {} ({}): a frame has waited {:.0f} ms for the client to read it; cancelling the stream "
         "(stall watchdog)",
         id_, peer_, stalled_ms);
+    // Counted before the status leaves, so a client that sees it sees the count too.
+    core_.counters().streams_stalled++;
     cancel_call(decided);
     return true;
 }
@@ -240,6 +242,8 @@ bool StreamSession::finish_if_not_opened(Clock::time_point now, std::chrono::mil
         plan_locked(actions);
     }
     spdlog::info("session {} ({}): no opening message within {} ms; finishing the call", id_, peer_, timeout.count());
+    // Counted before the status leaves, so a client that sees it sees the count too.
+    core_.counters().open_timeouts++;
     run(actions);
     return true;
 }

@@ -66,10 +66,12 @@ public:
     /// and its message (see cancel_call). For streams that drain() could not finish in time.
     void cancel(const grpc::Status& status);
     /// Watchdog: cancels the call, DEADLINE_EXCEEDED, when a frame has been in flight longer
-    /// than `timeout`. Returns true when it cancelled.
+    /// than `timeout`, counting it in ServerStats.streams_stalled first. Returns true when it
+    /// cancelled.
     bool cancel_if_stalled(Clock::time_point now, std::chrono::milliseconds timeout);
     /// Watchdog: finishes the call, DEADLINE_EXCEEDED, when its opening message has not arrived
-    /// within `timeout` of its start. Returns true when it did.
+    /// within `timeout` of its start, counting it in ServerStats.open_timeouts first. Returns
+    /// true when it did.
     bool finish_if_not_opened(Clock::time_point now, std::chrono::milliseconds timeout);
 
     void OnReadDone(bool ok) override;
