@@ -12,14 +12,24 @@ std::string image_size(const Intrinsics& intrinsics) {
     return std::to_string(intrinsics.width) + "x" + std::to_string(intrinsics.height);
 }
 
-v1::Frame rendered_frame(const FrameSetup& request, Format format, const ImageRGB8& image, const FrameStats& stats,
-                         const RenderTimes& times) {
+namespace {
+
+// What every image frame states about itself: the request it answers and the image's shape.
+v1::Frame frame_header(const FrameSetup& request, Format format, int width, int height) {
     v1::Frame frame;
     frame.set_sequence(request.sequence);
     frame.set_encoding(to_proto(format));
-    frame.set_width(static_cast<std::uint32_t>(image.width));
-    frame.set_height(static_cast<std::uint32_t>(image.height));
+    frame.set_width(static_cast<std::uint32_t>(width));
+    frame.set_height(static_cast<std::uint32_t>(height));
     frame.set_client_timestamp_us(request.client_timestamp_us);
+    return frame;
+}
+
+}  // namespace
+
+v1::Frame rendered_frame(const FrameSetup& request, Format format, const ImageRGB8& image, const FrameStats& stats,
+                         const RenderTimes& times) {
+    v1::Frame frame = frame_header(request, format, image.width, image.height);
     auto* timings = frame.mutable_timings();
     timings->set_queue_ms(ms_between(times.received, times.begin));
     timings->set_render_ms(ms_between(times.begin, times.rendered));
@@ -50,12 +60,7 @@ grpc::Status encode_frame(const ImageRGB8& image, const EncodeSettings& settings
 
 v1::Frame resent_frame(const FrameSetup& request, Format format, const Intrinsics& intrinsics, TimePoint received,
                        std::string data) {
-    v1::Frame frame;
-    frame.set_sequence(request.sequence);
-    frame.set_encoding(to_proto(format));
-    frame.set_width(static_cast<std::uint32_t>(intrinsics.width));
-    frame.set_height(static_cast<std::uint32_t>(intrinsics.height));
-    frame.set_client_timestamp_us(request.client_timestamp_us);
+    v1::Frame frame = frame_header(request, format, intrinsics.width, intrinsics.height);
     *frame.mutable_data() = std::move(data);
     const TimePoint now = std::chrono::steady_clock::now();
     frame.mutable_timings()->set_queue_ms(ms_between(received, now));
