@@ -34,8 +34,9 @@
 namespace catgs::cuda {
 namespace {
 
-/// Bytes of device memory one tile-Gaussian pair needs: key + value, twice (sort buffers).
-constexpr std::uint64_t kBytesPerPair = 2 * (sizeof(std::uint64_t) + sizeof(std::uint32_t));
+/// Bytes of device memory one tile-Gaussian pair needs: key + value, twice (sort buffers),
+/// and the emitted key a window keeps.
+constexpr std::uint64_t kBytesPerPair = 2 * (sizeof(std::uint64_t) + sizeof(std::uint32_t)) + sizeof(std::uint64_t);
 /// Share of free device memory the automatic pair budget may take (the rest stays for the
 /// scene, other renderers and CUB's temporary storage).
 constexpr double kAutoPairMemoryShare = 0.25;
@@ -133,7 +134,8 @@ FrameStats CudaRenderer<T>::render(const Camera& camera, const RenderOptions& op
             m.cached_split = m.ranges_and_split(f, f.total);
         } else {
             // The key frame's lists and order as they are; the marks keep the stage times at 0.
-            for (Event e : {Event::keys, Event::sort, Event::ranges, Event::split}) m.events.record(e, m.stream);
+            for (Event e : {Event::depth_order, Event::scan, Event::keys, Event::sort, Event::ranges, Event::split})
+                m.events.record(e, m.stream);
         }
         f.split_used = m.cached_split;
     }
@@ -259,16 +261,18 @@ void CudaRenderer<T>::Impl::preprocess(Frame<T>& f) {
     events.record(Event::preprocess, stream);
 }
 
+/// The Gaussians in depth order (sort's first part) and the scan of their counts in that
+/// order; a frame over the pair budget is planned in bands instead, which emit in slot order.
 template <typename T>
 void CudaRenderer<T>::Impl::scan(Frame<T>& f) {
-    f.total = scan_counts(key_space.slots);
-    events.record(Event::scan, stream);
+    f.total = order_by_depth(buffers.gaussians.sort_depth.data(), true);
     const std::uint64_t budget = pair_budget();
     if (f.total > budget) plan_bands(f, budget);
     events.synchronize(Event::scan);
     events.add(Stage::chunk_cull, Event::start, Event::chunk_cull);
     events.add(Stage::preprocess, Event::chunk_cull, Event::preprocess);
-    events.add(Stage::scan, Event::preprocess, Event::scan);
+    events.add(Stage::sort, Event::preprocess, Event::depth_order);
+    events.add(Stage::scan, Event::depth_order, Event::scan);
 }
 
 /// Over the pair budget: split the tile rows so each band's pairs fit. The full-frame counts
@@ -314,23 +318,25 @@ void CudaRenderer<T>::Impl::keys(const Frame<T>& f, TileRows rows, std::uint64_t
             p.keys[k].reserve(pairs, s);
             p.values[k].reserve(pairs, s);
         }
-        const GaussianBuffers<T>& g = buffers.gaussians;
+        GaussianBuffers<T>& g = buffers.gaussians;
+        const bool banded = f.bands.size() > 1;
+        // Cached frames that re-sort regroup the pairs in emission order (rekey). With the depth
+        // order reused they never read them, and the copy (8 bytes a pair, 6M pairs on the city)
+        // would only lengthen key frames; a banded frame starts no window.
+        const bool keep = f.plan.keep_emission_order && !banded;
+        if (keep) g.emission_offset.reserve(key_space.slots, s);
         cuda::keys(KeysArgs<T>{f.scene, key_space, buffers.window.views.data(), static_cast<int>(f.plan.poses.size()),
-                               f.options->culling, f.guard, g.projected.data(), g.touched.data(), g.offsets.data(),
-                               g.sort_depth.data(), rows, f.bands.size() > 1, f.reproject_actual, pairs,
+                               f.options->culling, f.guard, g.projected.data(), g.touched.data(),
+                               banded ? g.offsets.data() : buffers.depth.ranked_offsets.data(),
+                               banded ? nullptr : buffers.depth.order(), g.sort_depth.data(),
+                               keep ? g.emission_offset.data() : nullptr, rows, banded, f.reproject_actual, pairs,
                                p.keys[0].data(), p.values[0].data()},
                    s);
-    }
-    // Cached frames that re-sort re-key from the pairs in emission order (rekey). With the
-    // depth order reused they never read them, and the copy (12 bytes a pair, 6M pairs on the
-    // city) would only lengthen key frames; a banded frame starts no window.
-    if (f.plan.keep_emission_order && f.bands.size() == 1 && pairs > 0) {
-        p.emitted_keys.reserve(pairs, s);
-        p.emitted_values.reserve(pairs, s);
-        CATGS_CUDA_CHECK(cudaMemcpyAsync(p.emitted_keys.data(), p.keys[0].data(), pairs * sizeof(std::uint64_t),
-                                         cudaMemcpyDeviceToDevice, s));
-        CATGS_CUDA_CHECK(cudaMemcpyAsync(p.emitted_values.data(), p.values[0].data(), pairs * sizeof(std::uint32_t),
-                                         cudaMemcpyDeviceToDevice, s));
+        if (keep) {
+            p.emitted_keys.reserve(pairs, s);
+            CATGS_CUDA_CHECK(cudaMemcpyAsync(p.emitted_keys.data(), p.keys[0].data(), pairs * sizeof(std::uint64_t),
+                                             cudaMemcpyDeviceToDevice, s));
+        }
     }
     events.record(Event::keys, s);
 }
@@ -359,12 +365,16 @@ void CudaRenderer<T>::Impl::reproject(Frame<T>& f) {
 template <typename T>
 void CudaRenderer<T>::Impl::rekey(const Frame<T>& f) {
     PairBuffers& p = buffers.pairs;
+    GaussianBuffers<T>& g = buffers.gaussians;
+    // The key frame's depths are not needed again: sort_depth takes the current ones.
+    cuda::rekey_depth(RekeyDepthArgs<T>{key_space, g.touched.data(), g.projected.data(), g.sort_depth.data()}, stream);
+    order_by_depth(g.sort_depth.data(), false);
     if (f.total > 0) {
         p.current = 0;
-        cuda::rekey(
-            RekeyArgs<T>{f.total, p.emitted_keys.data(), p.emitted_values.data(), buffers.gaussians.projected.data(),
-                         f.view, f.options->culling, p.keys[0].data(), p.values[0].data()},
-            stream);
+        cuda::rekey(RekeyArgs<T>{key_space, g.touched.data(), buffers.depth.order(),
+                                 buffers.depth.ranked_offsets.data(), g.emission_offset.data(), p.emitted_keys.data(),
+                                 g.projected.data(), f.view, f.options->culling, p.keys[0].data(), p.values[0].data()},
+                    stream);
     }
     events.record(Event::keys, stream);
 }
@@ -374,14 +384,17 @@ void CudaRenderer<T>::Impl::rekey(const Frame<T>& f) {
 template <typename T>
 void CudaRenderer<T>::Impl::add_cached_list_times() {
     events.add(Stage::preprocess, Event::start, Event::preprocess);
-    events.add(Stage::keys, Event::preprocess, Event::keys);
+    events.add(Stage::sort, Event::preprocess, Event::depth_order);
+    events.add(Stage::scan, Event::depth_order, Event::scan);
+    events.add(Stage::keys, Event::scan, Event::keys);
     events.add(Stage::sort, Event::keys, Event::sort);
     events.add(Stage::ranges, Event::sort, Event::ranges);
 }
 
 template <typename T>
 void CudaRenderer<T>::Impl::sort(const Frame<T>& f, std::uint64_t pairs) {
-    cuda::sort(SortArgs{&buffers.pairs, pairs, f.tile_bits}, stream);
+    // Key frames emit in depth order unless banded; cached frames that re-sort regroup in it.
+    cuda::sort(SortArgs{&buffers.pairs, pairs, f.tile_bits, f.bands.size() == 1}, stream);
     events.record(Event::sort, stream);
 }
 

@@ -51,26 +51,46 @@ struct GaussianBuffers {
     DeviceArray<float> sort_depth;        // preprocess: the depth keys sort by
     DeviceArray<std::uint64_t> offsets;   // scan: exclusive sum; offsets[n] = pass total
     DeviceArray<std::uint8_t> scan_temp;  // CUB's DeviceScan
+    /// keys: where each slot's pairs start among a key frame's pairs in emission order (cached
+    /// frames that re-sort regroup them from there).
+    DeviceArray<std::uint64_t> emission_offset;
 
     std::size_t bytes() const {
         return projected.bytes() + visible.bytes() + touched.bytes() + sort_depth.bytes() + offsets.bytes() +
-               scan_temp.bytes();
+               scan_temp.bytes() + emission_offset.bytes();
+    }
+};
+
+/// Per slot, in depth order (depth_order, sort.cuh): the slots front to back, double-buffered
+/// for the sort, and their pair counts and scanned offsets in that order.
+struct DepthOrderBuffers {
+    DeviceArray<std::uint32_t> keys[2];         // depth bits
+    DeviceArray<std::uint32_t> slots[2];        // slot indices
+    int current = 0;                            // which of keys/slots holds the order
+    DeviceArray<std::uint64_t> ranked_touched;  // pairs of the k-th nearest slot, then a 0
+    DeviceArray<std::uint64_t> ranked_offsets;  // scan of ranked_touched
+    DeviceArray<std::uint8_t> sort_temp;
+
+    const std::uint32_t* order() const { return slots[current].data(); }
+    std::size_t bytes() const {
+        return keys[0].bytes() + keys[1].bytes() + slots[0].bytes() + slots[1].bytes() + ranked_touched.bytes() +
+               ranked_offsets.bytes() + sort_temp.bytes();
     }
 };
 
 /// Per tile-Gaussian pair: the keys and values, double-buffered for the sort, and a key
-/// frame's pairs in emission order, which cached frames that re-sort re-key from.
+/// frame's keys in emission order, which cached frames that re-sort re-key from (their values
+/// follow from GaussianBuffers::emission_offset).
 struct PairBuffers {
     DeviceArray<std::uint64_t> keys[2];
     DeviceArray<std::uint32_t> values[2];
     int current = 0;  // which of keys/values holds the sorted pairs
     DeviceArray<std::uint64_t> emitted_keys;
-    DeviceArray<std::uint32_t> emitted_values;
     DeviceArray<std::uint8_t> sort_temp;  // CUB's DeviceRadixSort
 
     std::size_t bytes() const {
         return keys[0].bytes() + keys[1].bytes() + values[0].bytes() + values[1].bytes() + emitted_keys.bytes() +
-               emitted_values.bytes() + sort_temp.bytes();
+               sort_temp.bytes();
     }
 };
 
@@ -101,12 +121,14 @@ struct FrameBuffers {
     WindowBuffers<T> window;
     ChunkBuffers chunks;
     GaussianBuffers<T> gaussians;
+    DepthOrderBuffers depth;
     PairBuffers pairs;
     TileBuffers tiles;
     PixelBuffers<T> pixels;
 
     std::size_t bytes() const {
-        return window.bytes() + chunks.bytes() + gaussians.bytes() + pairs.bytes() + tiles.bytes() + pixels.bytes();
+        return window.bytes() + chunks.bytes() + gaussians.bytes() + depth.bytes() + pairs.bytes() + tiles.bytes() +
+               pixels.bytes();
     }
 };
 

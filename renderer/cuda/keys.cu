@@ -8,18 +8,23 @@
 namespace catgs::cuda {
 namespace {
 
-// Keys at each Gaussian's offset, in Gaussian order, so that the stable sort keeps
-// index order for equal depths. `capacity` bounds every write.
+// Keys at each Gaussian's offset. With a depth order, thread k emits the k-th nearest slot, so
+// the pairs come out front to back, equal depths in slot order; banded frames emit in slot
+// order for the full-key sort. Either way the stable sort keeps slot (index) order for equal
+// depths. `capacity` bounds every write.
 template <typename T, int MaxWindow>
 __global__ void __launch_bounds__(kThreads)
     keys_kernel(DeviceSceneView scene, ChunkSpace space, const View<T>* views, int window, Culling culling, T guard,
                 const Projected<T>* projected, const std::uint64_t* touched, const std::uint64_t* offsets,
-                const float* sort_depth, TileRows rows, bool band, bool reprojected, std::uint64_t capacity,
-                std::uint64_t* keys, std::uint32_t* values) {
-    const std::uint64_t p = static_cast<std::uint64_t>(blockIdx.x) * blockDim.x + threadIdx.x;
+                const std::uint32_t* order, const float* sort_depth, std::uint64_t* emission_offset, TileRows rows,
+                bool band, bool reprojected, std::uint64_t capacity, std::uint64_t* keys, std::uint32_t* values) {
+    const std::uint64_t k = static_cast<std::uint64_t>(blockIdx.x) * blockDim.x + threadIdx.x;
+    if (k >= space.slots) return;
+    const std::uint64_t p = order ? order[k] : k;
     std::uint64_t i = 0;
-    if (p >= space.slots || touched[p] == 0 || !space.gaussian(p, i)) return;
-    std::uint64_t slot = offsets[p];
+    if (touched[p] == 0 || !space.gaussian(p, i)) return;
+    std::uint64_t slot = offsets[k];
+    if (emission_offset) emission_offset[p] = slot;
     const std::uint64_t end = min(slot + touched[p], capacity);
     const float depth = sort_depth[p];
     auto emit = [&](std::uint32_t tile) {
@@ -39,25 +44,40 @@ __global__ void __launch_bounds__(kThreads)
     for_each_window_tile<MaxWindow>(poses, valid, window, culling, guard, views[0], emit, rows);
 }
 
+template <typename T>
+__global__ void rekey_depth_kernel(ChunkSpace space, const std::uint64_t* touched, const Projected<T>* projected,
+                                   float* depth) {
+    const std::uint64_t p = static_cast<std::uint64_t>(blockIdx.x) * blockDim.x + threadIdx.x;
+    std::uint64_t i = 0;
+    if (p < space.slots && touched[p] > 0 && space.gaussian(p, i)) depth[p] = projected[i].key_depth;
+}
+
 // Cached frame, re-sort: every pair the key frame emitted keeps its tile if the footprint at
 // the current pose still touches it (the single-frame predicate) and takes the current depth;
-// otherwise it is parked past the grid (sorts last, no range covers it). Reading the pairs in
-// emission (Gaussian) order makes the stable sort order equal depths by index, as a full
-// render does.
+// otherwise it is parked past the grid (sorts last, no range covers it). Thread k moves the
+// pairs of the k-th nearest cached slot, so the tile sort leaves each list front to back with
+// equal depths in slot order, as a full render does.
 template <typename T>
-__global__ void rekey_kernel(std::uint64_t n, const std::uint64_t* emitted_keys, const std::uint32_t* emitted_values,
-                             const Projected<T>* projected, View<T> view, Culling culling, std::uint64_t* keys,
-                             std::uint32_t* values) {
-    const std::uint64_t j = static_cast<std::uint64_t>(blockIdx.x) * blockDim.x + threadIdx.x;
-    if (j >= n) return;
+__global__ void rekey_kernel(ChunkSpace space, const std::uint64_t* touched, const std::uint32_t* order,
+                             const std::uint64_t* offsets, const std::uint64_t* emission_offset,
+                             const std::uint64_t* emitted_keys, const Projected<T>* projected, View<T> view,
+                             Culling culling, std::uint64_t* keys, std::uint32_t* values) {
+    const std::uint64_t k = static_cast<std::uint64_t>(blockIdx.x) * blockDim.x + threadIdx.x;
+    if (k >= space.slots) return;
+    const std::uint64_t slot = order[k];
+    std::uint64_t i = 0;
+    const std::uint64_t count = touched[slot];
+    if (count == 0 || !space.gaussian(slot, i)) return;
     const std::uint32_t tiles = static_cast<std::uint32_t>(view.tiles_x) * view.tiles_y;
-    const std::uint32_t index = emitted_values[j];
-    const Projected<T>& p = projected[index];
-    const std::uint32_t tile = key_tile(emitted_keys[j]);
-    // Exact culling shares one list among all tiles: nothing to filter.
-    const bool keep = culling == Culling::exact || (p.opacity > T(0) && touches_tile(p, culling, view, tile));
-    keys[j] = make_sort_key(keep ? tile : parked_tile(tiles), p.key_depth);
-    values[j] = index;
+    const Projected<T>& p = projected[i];
+    const std::uint64_t from = emission_offset[slot], to = offsets[k];
+    for (std::uint64_t j = 0; j < count; ++j) {
+        const std::uint32_t tile = key_tile(emitted_keys[from + j]);
+        // Exact culling shares one list among all tiles: nothing to filter.
+        const bool keep = culling == Culling::exact || (p.opacity > T(0) && touches_tile(p, culling, view, tile));
+        keys[to + j] = make_sort_key(keep ? tile : parked_tile(tiles), p.key_depth);
+        values[to + j] = static_cast<std::uint32_t>(i);
+    }
 }
 
 // Count within a band of tile rows (overflow path only), through the same predicate.
@@ -80,19 +100,29 @@ void keys(const KeysArgs<T>& a, cudaStream_t s) {
     const unsigned blocks = blocks_for(a.space.slots, kThreads);
     if (a.window == 1)
         keys_kernel<T, 1><<<blocks, kThreads, 0, s>>>(a.scene, a.space, a.views, 1, a.culling, a.guard, a.projected,
-                                                      a.touched, a.offsets, a.sort_depth, a.rows, a.band, a.reprojected,
-                                                      a.capacity, a.keys, a.values);
+                                                      a.touched, a.offsets, a.order, a.sort_depth, a.emission_offset,
+                                                      a.rows, a.band, a.reprojected, a.capacity, a.keys, a.values);
     else
-        keys_kernel<T, kMaxWindow><<<blocks, kThreads, 0, s>>>(a.scene, a.space, a.views, a.window, a.culling, a.guard,
-                                                               a.projected, a.touched, a.offsets, a.sort_depth, a.rows,
-                                                               a.band, a.reprojected, a.capacity, a.keys, a.values);
+        keys_kernel<T, kMaxWindow><<<blocks, kThreads, 0, s>>>(
+            a.scene, a.space, a.views, a.window, a.culling, a.guard, a.projected, a.touched, a.offsets, a.order,
+            a.sort_depth, a.emission_offset, a.rows, a.band, a.reprojected, a.capacity, a.keys, a.values);
     CATGS_CUDA_CHECK_LAUNCH("keys_kernel");
 }
 
 template <typename T>
+void rekey_depth(const RekeyDepthArgs<T>& a, cudaStream_t s) {
+    if (a.space.slots == 0) return;
+    rekey_depth_kernel<T>
+        <<<blocks_for(a.space.slots, kThreads), kThreads, 0, s>>>(a.space, a.touched, a.projected, a.depth);
+    CATGS_CUDA_CHECK_LAUNCH("rekey_depth_kernel");
+}
+
+template <typename T>
 void rekey(const RekeyArgs<T>& a, cudaStream_t s) {
-    rekey_kernel<T><<<blocks_for(a.pairs, kThreads), kThreads, 0, s>>>(
-        a.pairs, a.emitted_keys, a.emitted_values, a.projected, a.view, a.culling, a.keys, a.values);
+    if (a.space.slots == 0) return;
+    rekey_kernel<T><<<blocks_for(a.space.slots, kThreads), kThreads, 0, s>>>(
+        a.space, a.touched, a.order, a.offsets, a.emission_offset, a.emitted_keys, a.projected, a.view, a.culling,
+        a.keys, a.values);
     CATGS_CUDA_CHECK_LAUNCH("rekey_kernel");
 }
 
@@ -114,6 +144,8 @@ std::vector<TileRows> band_rows(std::uint64_t total, std::uint64_t budget, int t
 
 template void keys(const KeysArgs<float>&, cudaStream_t);
 template void keys(const KeysArgs<double>&, cudaStream_t);
+template void rekey_depth(const RekeyDepthArgs<float>&, cudaStream_t);
+template void rekey_depth(const RekeyDepthArgs<double>&, cudaStream_t);
 template void rekey(const RekeyArgs<float>&, cudaStream_t);
 template void rekey(const RekeyArgs<double>&, cudaStream_t);
 template void count_band(const CountBandArgs<float>&, cudaStream_t);

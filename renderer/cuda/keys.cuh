@@ -1,6 +1,7 @@
 // keys: one (tile | depth) sort key per tile-Gaussian pair (stages/keys.hpp), emitted at each
-// Gaussian's scanned offset; rekey is the cached frames' keys, re-keying the key frame's pairs
-// at the current pose. When a frame's pairs pass the pair budget it is cut into bands of tile
+// Gaussian's scanned offset, Gaussians in depth order (depth_order, sort.cuh) so that the sort
+// need only order tiles; rekey is the cached frames' keys, regrouping the key frame's pairs
+// in the depth order of the current pose. When a frame's pairs pass the pair budget it is cut into bands of tile
 // rows (band_rows), and count_band recounts each band before its scan.
 #pragma once
 
@@ -27,8 +28,13 @@ struct KeysArgs {
     T guard;
     const Projected<T>* projected;
     const std::uint64_t* touched;
+    /// Where each Gaussian's keys go: with `order`, offsets[k] belongs to the k-th slot of the
+    /// depth order; without (banded frames), offsets are by slot.
     const std::uint64_t* offsets;
+    const std::uint32_t* order;
     const float* sort_depth;
+    /// When set, each slot's first pair's position (the pairs are kept for cached frames).
+    std::uint64_t* emission_offset;
     TileRows rows;           // the band's tile rows (all of them when not banded)
     bool band;               // banded: one pose, whose geometry preprocess stored
     bool reprojected;        // the window lowered the near plane (PreprocessArgs::reproject_actual)
@@ -40,12 +46,27 @@ struct KeysArgs {
 template <typename T>
 void keys(const KeysArgs<T>& args, cudaStream_t stream);
 
+/// The cached Gaussians' depths at the current pose, by slot, for depth_order.
+template <typename T>
+struct RekeyDepthArgs {
+    ChunkSpace space;               // the key frame's
+    const std::uint64_t* touched;   // the key frame's counts: 0 = not cached
+    const Projected<T>* projected;  // at the current pose (reproject)
+    float* depth;
+};
+
+template <typename T>
+void rekey_depth(const RekeyDepthArgs<T>& args, cudaStream_t stream);
+
 template <typename T>
 struct RekeyArgs {
-    std::uint64_t pairs;
-    const std::uint64_t* emitted_keys;  // the key frame's pairs in emission order
-    const std::uint32_t* emitted_values;
-    const Projected<T>* projected;  // at the current pose (reproject)
+    ChunkSpace space;
+    const std::uint64_t* touched;          // the key frame's counts
+    const std::uint32_t* order;            // the cached slots in depth order at the current pose
+    const std::uint64_t* offsets;          // by rank: where each slot's pairs go
+    const std::uint64_t* emission_offset;  // by slot: where they are among the emitted pairs
+    const std::uint64_t* emitted_keys;     // the key frame's pairs in emission order
+    const Projected<T>* projected;         // at the current pose (reproject)
     View<T> view;
     Culling culling;
     std::uint64_t* keys;

@@ -17,6 +17,7 @@
 #include "frame_buffers.hpp"
 #include "kernel_common.cuh"
 #include "scan.cuh"
+#include "sort.cuh"
 #include "stage_events.hpp"
 
 namespace catgs::cuda {
@@ -107,9 +108,27 @@ struct CudaRenderer<T>::Impl {
     std::uint64_t max_extra_tasks(const Frame<T>& f, std::uint64_t pairs) const {
         return f.split_used ? pairs / f.k_min + 1 : 0;
     }
+    /// Slot order (banded frames): the scan of `touched` into `offsets`.
     std::uint64_t scan_counts(std::uint64_t slots) {
         GaussianBuffers<T>& g = buffers.gaussians;
         return cuda::scan(ScanArgs{g.touched.data(), g.offsets.data(), slots, &g.scan_temp, host.total.data()}, stream);
+    }
+    /// Depth order: the scan of the counts depth_order ranked; reads the total back only when
+    /// `read_total` (cached frames know theirs).
+    std::uint64_t scan_ranked_counts(std::uint64_t slots, bool read_total) {
+        DepthOrderBuffers& o = buffers.depth;
+        return cuda::scan(ScanArgs{o.ranked_touched.data(), o.ranked_offsets.data(), slots,
+                                   &buffers.gaussians.scan_temp, read_total ? host.total.data() : nullptr},
+                          stream);
+    }
+    /// The slots with pairs in depth order by `depth` (sort.cuh), then their offsets.
+    std::uint64_t order_by_depth(const float* depth, bool read_total) {
+        cuda::depth_order(DepthOrderArgs{key_space.slots, buffers.gaussians.touched.data(), depth, &buffers.depth},
+                          stream);
+        events.record(Event::depth_order, stream);
+        const std::uint64_t total = scan_ranked_counts(key_space.slots, read_total);
+        events.record(Event::scan, stream);
+        return total;
     }
     DeviceSceneView scene_view() const {
         const DeviceScene& s = *scene;

@@ -13,6 +13,7 @@ std::uint64_t scan(const ScanArgs& a, cudaStream_t s) {
     a.temp->reserve(temp_bytes, s);
     CATGS_CUDA_CHECK(cub::DeviceScan::ExclusiveSum(a.temp->data(), temp_bytes, a.counts, a.offsets,
                                                    static_cast<std::int64_t>(a.n + 1), s));
+    if (!a.host_total) return 0;
     CATGS_CUDA_CHECK(cudaMemcpyAsync(a.host_total, a.offsets + a.n, sizeof(std::uint64_t), cudaMemcpyDeviceToHost, s));
     CATGS_CUDA_CHECK(cudaStreamSynchronize(s));
     return *a.host_total;

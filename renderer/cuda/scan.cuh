@@ -14,10 +14,10 @@ struct ScanArgs {
     std::uint64_t* offsets;  // n + 1 entries: offsets[n] is the total
     std::uint64_t n;
     DeviceArray<std::uint8_t>* temp;
-    std::uint64_t* host_total;  // pinned
+    std::uint64_t* host_total;  // pinned; null when the total is known (nothing is read back)
 };
 
-/// Returns the pass total (one read-back: synchronises the stream).
+/// Returns the pass total (one read-back: synchronises the stream), or 0 without host_total.
 std::uint64_t scan(const ScanArgs& args, cudaStream_t stream);
 
 }  // namespace catgs::cuda

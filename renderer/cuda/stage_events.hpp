@@ -19,6 +19,7 @@ enum class Event : int {
     start,
     chunk_cull,
     preprocess,
+    depth_order,  // sort's first part, before scan: the Gaussians front to back (sort.cuh)
     scan,
     band_count,
     band_scan,
@@ -31,7 +32,7 @@ enum class Event : int {
     copy_start,
     copy_out,
 };
-inline constexpr std::size_t kEventCount = 14;
+inline constexpr std::size_t kEventCount = 15;
 
 class StageEvents {
 public:
