@@ -139,6 +139,13 @@ FramePlanner::Plan FramePlanner::next(const Camera& actual, const CatgsOptions& 
     Plan plan;
     plan.poses = {actual};
     plan.plain = options.cache == CacheMode::off;
+    cost_feed_ = options.window_cost;
+    // Costs measured at other intrinsics say little about these (4K frames cost ~2-4x 1080p).
+    if (cost_feed_ != WindowCost::off &&
+        (!cost_intrinsics_ || !same_intrinsics(*cost_intrinsics_, actual.intrinsics))) {
+        costs_.reset();
+        cost_intrinsics_ = actual.intrinsics;
+    }
     if (plan.plain) return plan;
 
     // Cached frame: inside the current window and (with speculation) inside its envelope.
@@ -168,27 +175,13 @@ FramePlanner::Plan FramePlanner::next(const Camera& actual, const CatgsOptions& 
         }
     }
 
-    // Key frame: choose W from the expected screen motion, then the poses to speculate on.
-    int w = std::clamp(options.window, 1, kMaxWindow);
-    if (options.adaptive_window) {
-        if (!controller_) controller_.emplace(w, options.window_motion_budget_px);
-        const double dt = frame_interval(history_);
-        double speed = 0;
-        if (hints && hints->linear_velocity) {
-            const auto& v = *hints->linear_velocity;
-            speed = std::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
-        } else if (history_.size() >= 2) {
-            speed =
-                distance(camera_centre(history_.back().pose), camera_centre(history_[history_.size() - 2].pose)) / dt;
-        }
-        // Typical screen motion per frame, from the last key frame's depths (none yet: keep W).
-        if (summary_.mean_inverse_depth > 0) {
-            const double f = std::max(actual.intrinsics.fx, actual.intrinsics.fy);
-            w = controller_->update(f * (speed * dt * summary_.mean_inverse_depth + expected_turn_per_frame(hints)));
-        } else {
-            w = controller_->window();
-        }
+    // Key frame: the window that ends here is reported to the cost model, then W is chosen
+    // from the expected screen motion and, with the cost model, from the measured costs.
+    if (!window_end_reported_) {
+        costs_.window_ended(window_, frames_in_window_);
+        window_end_reported_ = true;
     }
+    int w = motion_window(actual, options, hints);
     plan.window = w;
     // Key frames that no window can pay for are plain frames, which skip the cache's work
     // (speculation, guard band, kept pairs; 6M city survey 1080p, H200: 1.59 ms at W = 1
@@ -198,6 +191,14 @@ FramePlanner::Plan FramePlanner::next(const Camera& actual, const CatgsOptions& 
     // median against 2.64 plain).
     const bool turning = options.adaptive_window && !options.resort_cached &&
                          expected_turn_per_frame(hints) > options.reuse_order_max_angle;
+    if (options.cache == CacheMode::speculative && w > 1 && !turning && options.adaptive_window &&
+        options.window_cost != WindowCost::off) {
+        // Within the motion bound, the cost model picks W, or a plain frame where no window pays.
+        const WindowCostModel::Choice choice = costs_.choose(w);
+        w = choice.window;
+        plan.window = w;
+        plan.probe = choice.probe;
+    }
     if (options.cache == CacheMode::speculative && (w == 1 || turning)) {
         plan.plain = true;
         plan.window = 1;
@@ -218,6 +219,24 @@ FramePlanner::Plan FramePlanner::next(const Camera& actual, const CatgsOptions& 
     return plan;
 }
 
+int FramePlanner::motion_window(const Camera& actual, const CatgsOptions& options, const FrameHints* hints) {
+    const int fixed = std::clamp(options.window, 1, kMaxWindow);
+    if (!options.adaptive_window) return fixed;
+    if (!controller_) controller_.emplace(fixed, options.window_motion_budget_px);
+    const double dt = frame_interval(history_);
+    double speed = 0;
+    if (hints && hints->linear_velocity) {
+        const auto& v = *hints->linear_velocity;
+        speed = std::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+    } else if (history_.size() >= 2) {
+        speed = distance(camera_centre(history_.back().pose), camera_centre(history_[history_.size() - 2].pose)) / dt;
+    }
+    // Typical screen motion per frame, from the last key frame's depths (none yet: keep W).
+    if (!(summary_.mean_inverse_depth > 0)) return controller_->window();
+    const double f = std::max(actual.intrinsics.fx, actual.intrinsics.fy);
+    return controller_->update(f * (speed * dt * summary_.mean_inverse_depth + expected_turn_per_frame(hints)));
+}
+
 double FramePlanner::expected_turn_per_frame(const FrameHints* hints) const {
     if (hints && hints->angular_speed) return *hints->angular_speed * frame_interval(history_);
     if (history_.size() < 2) return 0;
@@ -231,9 +250,24 @@ void FramePlanner::key_rendered(const Plan& plan, const KeyFrameSummary& summary
     frames_in_window_ = 1;
     window_resorted_ = false;
     emission_order_kept_ = plan.keep_emission_order;
+    window_end_reported_ = false;
+}
+
+void FramePlanner::frame_rendered(const Plan& plan, const FrameStats& stats) {
+    if (cost_feed_ == WindowCost::off) return;
+    const double cost = frame_cost(stats, cost_feed_);
+    if (!(cost > 0) || !std::isfinite(cost)) return;
+    if (plan.plain)
+        costs_.plain_rendered(cost);
+    else if (!plan.key)
+        costs_.cached_rendered(plan.window, cost);
+    else if (plan.poses.size() > 1)  // not the key frame of one pose that re-keys a window (next)
+        costs_.key_rendered(plan.window, cost);
 }
 
 void FramePlanner::invalidate() {
+    if (!window_end_reported_ && !envelope_.empty()) costs_.window_ended(window_, frames_in_window_);
+    window_end_reported_ = true;
     envelope_.clear();
     frames_in_window_ = 0;
     window_resorted_ = false;
@@ -241,6 +275,9 @@ void FramePlanner::invalidate() {
 }
 
 void FramePlanner::reset() {
+    costs_.reset();
+    cost_intrinsics_.reset();
+    window_end_reported_ = true;
     history_.clear();
     controller_.reset();
     envelope_.clear();

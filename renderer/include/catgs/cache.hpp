@@ -1,6 +1,8 @@
 // CaT-GS frame planning, shared by every backend: which frames are key frames, which poses a
-// key frame speculates on, the envelope of poses its cache covers, and the motion-adaptive
-// window W.
+// key frame speculates on, the envelope of poses its cache covers, and the adaptive window W:
+// bounded by the expected screen motion (WindowController), chosen within that bound from the
+// frame costs the backend measured, or a plain frame where no window pays (window_cost.hpp,
+// CatgsOptions::window_cost).
 //
 // Guarantee (docs/pipeline.md, "Guarantee", states it too): a frame is drawn from the cache only when it has the key
 // frame's intrinsics and resolution and its pose lies within the envelope: within `guard_px`
@@ -22,6 +24,7 @@
 
 #include "catgs/camera.hpp"
 #include "catgs/constants.hpp"
+#include "catgs/window_cost.hpp"
 
 namespace catgs {
 
@@ -65,6 +68,11 @@ struct CatgsOptions {
     double guard_translation = 0.25;  ///< envelope radius in metres (also lowers the near plane)
     /// Screen motion (pixels) a window may span before W shrinks: one tile.
     double window_motion_budget_px = 16.0;
+    /// With the adaptive window: choose W, or a plain frame, from the costs the backend measures
+    /// (window_cost.hpp) within the motion-adaptive W; off: from the motion alone. Off here, so
+    /// that the plans of tests and code that set their own options do not depend on timing;
+    /// default_pipeline_options() measures time.
+    WindowCost window_cost = WindowCost::off;
 };
 
 /// Lists this many entries long or shorter are never split by the automatic k.
@@ -130,6 +138,9 @@ public:
         /// Key frame rendered as with the cache off (no speculation, guard band or kept lists):
         /// the cache is off, or a window would not pay for its key frame (FramePlanner::next).
         bool plain = false;
+        /// Chosen by the cost model to refresh an estimate (WindowCostModel's probes), not as
+        /// the cheapest.
+        bool probe = false;
         /// Key frame: keep its pairs in emission (Gaussian) order besides the sorted lists, since
         /// a cached frame of its window may re-sort, and re-sorting re-keys from them so that
         /// the stable sort orders equal depths by index, as a full render does.
@@ -149,13 +160,22 @@ public:
     Plan next(const Camera& actual, const CatgsOptions& options, const FrameHints* hints = nullptr);
     /// Called by the backend after rendering a key frame of `plan`.
     void key_rendered(const Plan& plan, const KeyFrameSummary& summary);
+    /// Called by the backend after every frame with what it measured: the cost model
+    /// (CatgsOptions::window_cost) learns from it. Frames of other plans, or of an option
+    /// without the cost model, teach it nothing.
+    void frame_rendered(const Plan& plan, const FrameStats& stats);
     /// The last frame could not be cached (e.g. rendered in bands): the next is a key frame.
     void invalidate();
+    /// Forgets the cache, the pose history and the learned costs (a new scene or stream).
     void reset();
+    /// What the cost model has learned (tests and tools read it).
+    const WindowCostModel& cost_model() const { return costs_; }
 
 private:
     /// Radians the camera turns per frame: the reported angular speed, else the last step.
     double expected_turn_per_frame(const FrameHints* hints) const;
+    /// W from the expected screen motion (the adaptive window), or the fixed W.
+    int motion_window(const Camera& actual, const CatgsOptions& options, const FrameHints* hints);
 
     std::deque<Camera> history_;  // recent actual cameras, newest last
     std::optional<WindowController> controller_;
@@ -168,6 +188,13 @@ private:
     bool window_resorted_ = false;
     // The key frame of this window kept its pairs in emission order (Plan::keep_emission_order).
     bool emission_order_kept_ = false;
+    // The cost model, the feed it learns from (the options of the last plan) and the
+    // intrinsics its costs were measured at (costs change with the resolution).
+    WindowCostModel costs_;
+    WindowCost cost_feed_ = WindowCost::off;
+    std::optional<Intrinsics> cost_intrinsics_;
+    // The current window's length has been reported to the cost model.
+    bool window_end_reported_ = true;
 };
 
 /// Extrapolates `count` poses after the newest camera of `history` at constant linear and
