@@ -165,7 +165,9 @@ FrameStats CudaRenderer<T>::render(const Camera& camera, const RenderOptions& op
                        f.split_used,
                        f.bands.size() > 1,
                        m.host.counters.data()->tasks};
-    return m.frame_stats(f);
+    const FrameStats stats = m.frame_stats(f);
+    m.planner.frame_rendered(f.plan, stats);
+    return stats;
 }
 
 template <typename T>

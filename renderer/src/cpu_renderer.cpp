@@ -117,6 +117,7 @@ FrameStats CpuRenderer<T>::render(const Scene& scene, const Camera& camera, cons
     stats.chunks_culled = chunks_culled_;
     for (std::size_t i = 0; i < projected_.size(); ++i)
         stats.visible += tiles_touched_[i] > 0 && projected_[i].opacity > 0;
+    planner_.frame_rendered(plan, stats);
     return stats;
 }
 

@@ -50,13 +50,16 @@ inline constexpr double kDefaultReuseOrderMaxAngle = 1e-6;  // radians
 /// The pipeline catgs-render, catgs-bench and the server run unless told otherwise: the fastest
 /// configuration on the H200 that meets the accuracy bar (PSNR >= 45 dB mean and >= 40 dB on
 /// the worst frame against the per-frame pipeline, no tile missing a Gaussian; docs/results/)
-/// on every test path: the CaT-GS speculative cache with the adaptive window; its frames reuse
-/// the key frame's depth order while the camera only translates and re-sort once it turns
-/// (kDefaultReuseOrderMaxAngle); split k = kDefaultSplitK; guard kDefaultGuardPx.
+/// on every test path: the CaT-GS speculative cache with the adaptive window, W chosen from the
+/// measured frame times within the motion bound and plain frames where no window pays
+/// (window_cost.hpp); its frames reuse the key frame's depth order while the camera only
+/// translates and re-sort once it turns (kDefaultReuseOrderMaxAngle); split k = kDefaultSplitK;
+/// guard kDefaultGuardPx.
 inline RenderOptions default_pipeline_options() {
     RenderOptions o;
     o.catgs.cache = CacheMode::speculative;
     o.catgs.adaptive_window = true;
+    o.catgs.window_cost = WindowCost::time;
     o.catgs.resort_cached = false;
     o.catgs.reuse_order_max_angle = kDefaultReuseOrderMaxAngle;
     o.catgs.split_k = kDefaultSplitK;
