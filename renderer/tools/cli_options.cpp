@@ -24,6 +24,7 @@ PipelineFlags::PipelineFlags(const RenderOptions& o)
       cache(cache_mode_name(o.catgs.cache)),
       window(o.catgs.adaptive_window ? "adaptive" : std::to_string(o.catgs.window)),
       window_start(o.catgs.window),
+      window_cost(window_cost_name(o.catgs.window_cost)),
       guard_px(o.catgs.guard_px),
       guard_m(o.catgs.guard_translation),
       resort(o.catgs.resort_cached ? "on" : "off"),
@@ -74,6 +75,11 @@ void add_pipeline_flags(CLI::App& app, PipelineFlags& f) {
         ->capture_default_str();
     app.add_option("--window", f.window, "speculation window W: adaptive, or a fixed 1..16")->capture_default_str();
     app.add_option("--window-start", f.window_start, "initial W of the adaptive window")->capture_default_str();
+    app.add_option("--window-cost", f.window_cost,
+                   "what the adaptive window chooses W from, within the motion bound: time (each frame's measured "
+                   "time; plain frames where no window pays), work (each frame's work counts: reproducible), or off "
+                   "(motion alone)")
+        ->capture_default_str();
     app.add_option("--guard-px", f.guard_px, "cache guard band: footprint dilation and envelope radius, pixels")
         ->capture_default_str();
     app.add_option("--guard-m", f.guard_m, "cache envelope radius in metres")->capture_default_str();
@@ -124,6 +130,9 @@ void apply_pipeline_flags(const PipelineFlags& f, RenderOptions& options) {
     }
     if (f.window_start < 1 || f.window_start > kMaxWindow)
         throw Error("--window-start " + std::to_string(f.window_start) + ": expected 1..16");
+    if (f.window_cost != "off" && f.window_cost != "time" && f.window_cost != "work")
+        throw Error("--window-cost '" + f.window_cost + "': expected time, work or off");
+    c.window_cost = parse_window_cost(f.window_cost);
     if (!(f.guard_px >= 0 && f.guard_px <= 64)) throw Error("--guard-px: expected 0..64 pixels");
     if (!(f.guard_m >= 0 && f.guard_m <= 100)) throw Error("--guard-m: expected 0..100 metres");
     c.guard_px = f.guard_px;
@@ -146,7 +155,10 @@ std::string describe_pipeline(const RenderOptions& o) {
     const CatgsOptions& c = o.catgs;
     s += c.split_auto ? ", split auto" : (c.split_k ? ", split k=" + std::to_string(c.split_k) : ", no split");
     s += std::string(", cache ") + cache_mode_name(c.cache);
-    if (c.cache != CacheMode::off) s += c.adaptive_window ? ", W adaptive" : ", W=" + std::to_string(c.window);
+    if (c.cache != CacheMode::off && !c.adaptive_window) s += ", W=" + std::to_string(c.window);
+    if (c.cache != CacheMode::off && c.adaptive_window) s += ", W adaptive";
+    if (c.cache != CacheMode::off && c.adaptive_window && c.window_cost != WindowCost::off)
+        s += std::string(" by ") + window_cost_name(c.window_cost);
     if (c.cache != CacheMode::off && !c.resort_cached)
         s += std::isfinite(c.reuse_order_max_angle)
                  ? ", depth order reused within " + PipelineFlags::angle_name(c.reuse_order_max_angle) + " deg"

@@ -23,6 +23,7 @@ struct PipelineFlags {
     double split_tail;
     std::string cache, window;
     int window_start;
+    std::string window_cost;
     double guard_px, guard_m;
     std::string resort, chunks, reuse_order_max_deg;
 
