@@ -43,6 +43,8 @@ struct CacheRun {
 inline std::vector<CacheRun> accuracy_bar_runs() {
     RenderOptions defaults = default_pipeline_options();
     defaults.catgs.split_k = 64;
+    // The window chosen from work counts, not wall time, so that every run plans alike.
+    defaults.catgs.window_cost = WindowCost::work;
     RenderOptions fixed = defaults;
     fixed.catgs.adaptive_window = false;
     fixed.catgs.window = 4;
