@@ -119,6 +119,19 @@ RenderOptions render_options_for(const v1::PipelineOptions& p, const v1::Color* 
         c.adaptive_window = true;
         if (p.window_start() > 0) c.window = static_cast<int>(p.window_start());
     }
+    switch (p.window_cost()) {
+        case v1::WINDOW_COST_TIME:
+            c.window_cost = WindowCost::time;
+            break;
+        case v1::WINDOW_COST_WORK:
+            c.window_cost = WindowCost::work;
+            break;
+        case v1::WINDOW_COST_OFF:
+            c.window_cost = WindowCost::off;
+            break;
+        default:
+            break;
+    }
     if (p.has_reuse_depth_order()) c.resort_cached = !p.reuse_depth_order();
     if (p.has_reuse_order_max_degrees()) c.reuse_order_max_angle = p.reuse_order_max_degrees() * kPi / 180.0;
     switch (p.split()) {

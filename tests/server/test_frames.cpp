@@ -83,6 +83,8 @@ protected:
 TEST_F(FramesTest, PngFramesAreExactWithTheSpeculativeCacheAndHints) {
     v1::SessionConfig config = session_config(v1::ENCODING_PNG);
     config.mutable_pipeline()->set_cache(v1::CACHE_MODE_SPECULATIVE);
+    // Counted work, not time, chooses W: the reference renderer then plans the same frames.
+    config.mutable_pipeline()->set_window_cost(v1::WINDOW_COST_WORK);
     stream_and_compare(config, true, true);
 }
 
@@ -113,7 +115,9 @@ TEST_F(FramesTest, RawFramesAreExactWithTheReusedDepthOrder) {
 }
 
 TEST_F(FramesTest, JpegQuality90IsCloseToTheReference) {
-    stream_and_compare(session_config(v1::ENCODING_JPEG, 90), false, true);
+    v1::SessionConfig config = session_config(v1::ENCODING_JPEG, 90);
+    config.mutable_pipeline()->set_window_cost(v1::WINDOW_COST_WORK);  // as above: the same plan
+    stream_and_compare(config, false, true);
 }
 
 // A hovering drone or a paused viewer repeats its pose: the server re-sends the last frame's
