@@ -1,127 +1,124 @@
 #include "catgs/server/encoder.hpp"
 
-#include <png.h>
-#include <turbojpeg.h>
-
-#include <csetjmp>
-#include <cstdio>
-#include <cstring>
+#include <mutex>
+#include <thread>
 
 #include "catgs/error.hpp"
+#include "catgs/parallel.hpp"
+#include "catgs/server/encode_methods.hpp"
 
 namespace catgs::server {
 namespace {
 
-/// zlib level for PNG. PNG is the lossless / debug path and the encoder runs per frame, so
-/// speed matters more than the last percent of size: level 1 is several times faster than
-/// zlib's default 6 on rendered images for files only slightly larger.
-constexpr int kPngCompressionLevel = 1;
-
-/// One TurboJPEG compressor per encoder thread: creating a handle per frame costs more than
-/// encoding a small frame, and a handle must not be used by two threads at once.
-class JpegHandle {
-public:
-    JpegHandle() : handle_(tjInitCompress()) {}
-    ~JpegHandle() {
-        if (handle_) tjDestroy(handle_);
+JpegEncoder resolve(JpegEncoder wanted) {
+    switch (wanted) {
+        case JpegEncoder::turbo:
+            return JpegEncoder::turbo;
+        case JpegEncoder::nvjpeg:
+            if (const std::string why = nvjpeg_unusable_reason(); !why.empty())
+                throw Error("--jpeg-encoder nvjpeg: " + why + " (use --jpeg-encoder turbo or auto)");
+            return JpegEncoder::nvjpeg;
+        case JpegEncoder::automatic:
+            return nvjpeg_unusable_reason().empty() ? JpegEncoder::nvjpeg : JpegEncoder::turbo;
     }
-    JpegHandle(const JpegHandle&) = delete;
-    JpegHandle& operator=(const JpegHandle&) = delete;
-    tjhandle get() const { return handle_; }
-
-private:
-    tjhandle handle_;
-};
-
-void encode_jpeg(const ImageRGB8& image, const EncodeSettings& s, std::string& out) {
-    thread_local JpegHandle handle;
-    if (!handle.get()) throw Error("jpeg encoder: tjInitCompress failed");
-    const int subsampling = s.jpeg_444 ? TJSAMP_444 : TJSAMP_420;
-    // Compress straight into the output string, pre-sized to TurboJPEG's worst case so that it
-    // never reallocates (TJFLAG_NOREALLOC), then trimmed.
-    const unsigned long capacity = tjBufSize(image.width, image.height, subsampling);
-    out.resize(capacity);
-    auto* buffer = reinterpret_cast<unsigned char*>(out.data());
-    unsigned long size = capacity;
-    if (tjCompress2(handle.get(), image.rgb.data(), image.width, 0, image.height, TJPF_RGB, &buffer, &size, subsampling,
-                    s.jpeg_quality, TJFLAG_NOREALLOC) != 0)
-        throw Error(std::string("jpeg encoder: ") + tjGetErrorStr2(handle.get()));
-    out.resize(size);
+    throw Error("encoder: unknown JPEG encoder " + std::to_string(static_cast<int>(wanted)));
 }
 
-struct PngWriteState {
-    std::string* out;
-    char error[256];
-};
+// More helpers than this only add wake-ups: a 4K frame has 63 parts of kMinPartPixels.
+constexpr int kMaxEncodeThreads = 256;
 
-void png_append(png_structp png, png_bytep data, png_size_t length) {
-    auto* state = static_cast<PngWriteState*>(png_get_io_ptr(png));
-    state->out->append(reinterpret_cast<const char*>(data), length);
+int thread_count(int wanted) {
+    if (wanted < 0 || wanted > kMaxEncodeThreads)
+        throw Error("--encode-threads " + std::to_string(wanted) + ": expected 0 (every core) to " +
+                    std::to_string(kMaxEncodeThreads));
+    return wanted == 0 ? default_thread_count() : wanted;
 }
 
-void png_flush(png_structp) {}
-
-[[noreturn]] void png_fail(png_structp png, png_const_charp message) {
-    auto* state = static_cast<PngWriteState*>(png_get_error_ptr(png));
-    std::snprintf(state->error, sizeof state->error, "%s", message);
-    std::longjmp(png_jmpbuf(png), 1);
+std::mutex& process_encoder_mutex() {
+    static std::mutex mutex;
+    return mutex;
 }
 
-void png_warn(png_structp, png_const_charp) {}
-
-// libpng reports errors by longjmp: nothing with a destructor may live in this function's
-// frame between setjmp and the end (the output string is owned by the caller).
-bool encode_png_raw(const ImageRGB8& image, PngWriteState& state) {
-    png_structp png = png_create_write_struct(PNG_LIBPNG_VER_STRING, &state, png_fail, png_warn);
-    if (!png) return false;
-    png_infop info = png_create_info_struct(png);
-    if (!info) {
-        png_destroy_write_struct(&png, nullptr);
-        return false;
-    }
-    if (setjmp(png_jmpbuf(png))) {
-        png_destroy_write_struct(&png, &info);
-        return false;
-    }
-    png_set_write_fn(png, &state, png_append, png_flush);
-    png_set_compression_level(png, kPngCompressionLevel);
-    png_set_IHDR(png, info, static_cast<png_uint_32>(image.width), static_cast<png_uint_32>(image.height), 8,
-                 PNG_COLOR_TYPE_RGB, PNG_INTERLACE_NONE, PNG_COMPRESSION_TYPE_DEFAULT, PNG_FILTER_TYPE_DEFAULT);
-    png_write_info(png, info);
-    const std::size_t stride = 3 * static_cast<std::size_t>(image.width);
-    for (int y = 0; y < image.height; ++y)
-        png_write_row(png, const_cast<png_bytep>(image.rgb.data() + static_cast<std::size_t>(y) * stride));
-    png_write_end(png, info);
-    png_destroy_write_struct(&png, &info);
-    return true;
+// Shared, so that frames being encoded keep the encoder they started on when
+// configure_encoder replaces it.
+std::shared_ptr<FrameEncoder>& process_encoder_slot() {
+    static std::shared_ptr<FrameEncoder> encoder;
+    return encoder;
 }
 
-void encode_png(const ImageRGB8& image, std::string& out) {
-    out.clear();
-    // Rendered frames compress to roughly a third of raw; reserving that avoids most regrowth.
-    out.reserve(image.rgb.size() / 3 + 1024);
-    PngWriteState state{&out, "out of memory"};
-    if (!encode_png_raw(image, state)) throw Error(std::string("png encoder: ") + state.error);
+std::shared_ptr<FrameEncoder> process_encoder() {
+    std::lock_guard lock(process_encoder_mutex());
+    auto& slot = process_encoder_slot();
+    if (!slot) slot = std::make_shared<FrameEncoder>();
+    return slot;
 }
 
 }  // namespace
 
-void encode_image(const ImageRGB8& image, const EncodeSettings& settings, std::string& out) {
+JpegEncoder parse_jpeg_encoder(const std::string& value, const std::string& flag) {
+    if (value == "auto") return JpegEncoder::automatic;
+    if (value == "turbo") return JpegEncoder::turbo;
+    if (value == "nvjpeg") return JpegEncoder::nvjpeg;
+    throw Error(flag + " '" + value + "': expected auto, turbo or nvjpeg");
+}
+
+const char* jpeg_encoder_name(JpegEncoder encoder) {
+    switch (encoder) {
+        case JpegEncoder::automatic:
+            return "auto";
+        case JpegEncoder::turbo:
+            return "turbo";
+        case JpegEncoder::nvjpeg:
+            return "nvjpeg";
+    }
+    return "?";
+}
+
+FrameEncoder::FrameEncoder(const EncoderOptions& options)
+    : jpeg_(resolve(options.jpeg)), pool_(std::make_unique<EncodePool>(thread_count(options.threads))) {}
+
+FrameEncoder::~FrameEncoder() = default;
+
+int FrameEncoder::threads() const {
+    return pool_->threads();
+}
+
+void FrameEncoder::encode(const ImageRGB8& image, const EncodeSettings& settings, std::string& out) {
     const std::size_t expected = 3 * static_cast<std::size_t>(image.width) * static_cast<std::size_t>(image.height);
     if (image.width <= 0 || image.height <= 0 || image.rgb.size() != expected)
-        throw Error("encoder: image size does not match its width and height");
+        throw Error("encoder: image of " + std::to_string(image.width) + "x" + std::to_string(image.height) + " has " +
+                    std::to_string(image.rgb.size()) + " bytes, expected " + std::to_string(expected));
+    const int parts = jpeg_strip_count(image.width, image.height, pool_->threads());
     switch (settings.format) {
         case Format::jpeg:
-            encode_jpeg(image, settings, out);
-            return;
+            if (settings.jpeg_quality < 1 || settings.jpeg_quality > 100)
+                throw Error("encoder: jpeg quality " + std::to_string(settings.jpeg_quality) + " is outside 1..100");
+            if (jpeg_ == JpegEncoder::nvjpeg)
+                return encode_jpeg_nvjpeg(image, settings.jpeg_quality, settings.jpeg_444, out);
+            return encode_jpeg_strips(image, settings.jpeg_quality, settings.jpeg_444, parts, *pool_, out);
         case Format::png:
-            encode_png(image, out);
-            return;
+            if (parts >= kMinParallelPngParts)
+                return encode_png_parallel(image, kPngFilter, kPngLevel, kPngStrategy, parts, *pool_, out);
+            return encode_png_libdeflate(image, kPngFilter, kPngLevel, out);
         case Format::raw_rgb8:
             out.assign(reinterpret_cast<const char*>(image.rgb.data()), image.rgb.size());
             return;
     }
-    throw Error("encoder: unknown format");
+    throw Error("encoder: unknown format " + std::to_string(static_cast<int>(settings.format)));
+}
+
+void configure_encoder(const EncoderOptions& options) {
+    auto encoder = std::make_shared<FrameEncoder>(options);
+    std::lock_guard lock(process_encoder_mutex());
+    process_encoder_slot() = std::move(encoder);
+}
+
+JpegEncoder configured_jpeg_encoder() {
+    return process_encoder()->jpeg_encoder();
+}
+
+void encode_image(const ImageRGB8& image, const EncodeSettings& settings, std::string& out) {
+    process_encoder()->encode(image, settings, out);
 }
 
 const char* format_name(Format format) {
