@@ -3,6 +3,7 @@
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
+#include <thread>
 
 #include "catgs/server/stream_session.hpp"
 
@@ -22,10 +23,48 @@ bool constant_time_equal(const std::string& a, const std::string& b) {
     return diff == 0;
 }
 
+/// Cores the CUDA backend's render workers use between them: they mostly wait for the device.
+constexpr int kCudaFeedingCores = 1;
+
+/// Replaces 0 (auto) worker counts with auto_worker_counts, and logs what was chosen.
+ServerOptions with_worker_counts(ServerOptions o) {
+    if (o.render_workers > 0 && o.encode_workers > 0) return o;
+    const int cores = static_cast<int>(std::thread::hardware_concurrency());
+    const WorkerCounts counts = auto_worker_counts(o.backend, cores, o.limits.max_sessions);
+    const bool render_auto = o.render_workers <= 0, encode_auto = o.encode_workers <= 0;
+    if (render_auto) o.render_workers = counts.render;
+    if (encode_auto) o.encode_workers = counts.encode;
+    spdlog::info("workers: {} render{}, {} encode{} ({} backend, {} cores)", o.render_workers,
+                 render_auto ? " (auto)" : "", o.encode_workers, encode_auto ? " (auto)" : "", o.backend, cores);
+    return o;
+}
+
 }  // namespace
 
+WorkerCounts auto_worker_counts(const std::string& backend, int cores, int max_sessions) {
+    cores = std::max(cores, 1);
+    WorkerCounts counts;
+    int left = 0;  // cores the renders leave to encoding
+    if (backend == "cuda") {
+        counts.render = kRenderWorkersPerGpu;
+        left = cores - kCudaFeedingCores;
+    } else {
+        counts.render = std::min(2, cores);
+    }
+    counts.encode = std::max(kMinEncodeWorkers, std::min(left, max_sessions));
+    return counts;
+}
+
+std::string auto_worker_counts_help() {
+    return "0: auto, from the machine: render " + std::to_string(kRenderWorkersPerGpu) +
+           " on CUDA (sessions' frames overlap on the GPU), 2 on the CPU backend (1 on one core); encode the cores "
+           "left (CUDA: all but " +
+           std::to_string(kCudaFeedingCores) + ", CPU: none), at least " + std::to_string(kMinEncodeWorkers) +
+           ", at most --max-sessions";
+}
+
 ServerCore::ServerCore(ServerOptions options)
-    : options_(std::move(options)),
+    : options_(with_worker_counts(std::move(options))),
       scenes_(options_.scene_root, options_.limits.max_scene_bytes),
       admission_(options_.limits.max_sessions),
       render_pool_("render", options_.render_workers),

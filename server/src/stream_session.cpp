@@ -16,6 +16,10 @@ namespace {
 /// Error frames are tiny, but a client sending bad requests faster than it reads must not
 /// make the server queue without bound: beyond this many waiting, errors are only counted.
 constexpr std::size_t kMaxQueuedErrorFrames = 8;
+/// Image frames a session holds on the way out: one in gRPC's hands and one waiting, so that
+/// the next frame is ready the moment the previous one leaves, and no more, so that a client
+/// that stops reading costs at most that.
+constexpr int kOutputFrames = 2;
 
 const char* kind_name(const v1::StreamRequest& r) {
     switch (r.kind_case()) {
@@ -36,6 +40,8 @@ StreamSession::StreamSession(ServerCore& core, grpc::CallbackServerContext* cont
       id_(core.counters().next_session_id++),
       started_(Clock::now()),
       peer_(context->peer()),
+      render_flow_(core.render_pool().open_flow()),
+      encode_flow_(core.encode_pool().open_flow()),
       pose_rate_(core.options().limits.max_pose_rate, started_) {
     // The proxy's affinity key (deploy/envoy*.yaml), logged so that an operator can follow a
     // reconnecting viewer across sessions. gRPC admits only printable ASCII in header values;
@@ -44,6 +50,9 @@ StreamSession::StreamSession(ServerCore& core, grpc::CallbackServerContext* cont
     if (auto it = metadata.find("x-catgs-session"); it != metadata.end())
         peer_ +=
             " (x-catgs-session " + std::string(it->second.data(), std::min<std::size_t>(it->second.size(), 128)) + ")";
+    // The browser's address, for streams bridged by the web endpoint (in-process peers).
+    if (auto it = metadata.find("x-catgs-web-peer"); it != metadata.end())
+        peer_ += " (" + std::string(it->second.data(), std::min<std::size_t>(it->second.size(), 192)) + ")";
 }
 
 StreamSession::~StreamSession() {
@@ -260,7 +269,7 @@ void StreamSession::handle_open(const v1::SessionConfig& config) {
     phase_ = Phase::opening;
     core_.counters().sessions_opened++;
     // Creating the renderer (and on CUDA uploading the scene) is slow: a worker does it.
-    if (!core_.render_pool().post([self = shared_from_this()] { self->initialise(); }))
+    if (!core_.render_pool().post(render_flow_, [self = shared_from_this()] { self->initialise(); }))
         request_finish_locked(shutting_down_status());
     if (!config.client_name().empty()) peer_ += " (" + config.client_name() + ")";
 }
@@ -382,6 +391,13 @@ bool StreamSession::served_locked() const {
     return phase_ == Phase::open && reads_done_ && pipeline_empty;
 }
 
+// mutex_ held. A frame written now counts as taking its place until OnWriteDone (the write
+// completes when the transport has taken it, i.e. when flow control lets it through).
+bool StreamSession::room_for_frame_locked() const {
+    const int taken = (under_way_.write ? 1 : 0) + (next_image_ ? 1 : 0) + encoding_;
+    return taken < kOutputFrames;
+}
+
 // mutex_ held. Decides the next steps; run() performs them after the lock is released.
 void StreamSession::plan_locked(Actions& actions) {
     if (served_locked()) request_finish_locked(grpc::Status::OK);
@@ -395,7 +411,7 @@ void StreamSession::plan_locked(Actions& actions) {
         // After the client half-closed it can no longer acknowledge: its last pose renders
         // regardless of credit.
         const bool credit = reads_done_ || static_cast<int>(unacked_.size()) < setup_.max_unacked_frames;
-        if (phase_ == Phase::open && !render_busy_ && pending_ && credit) {
+        if (phase_ == Phase::open && !render_busy_ && pending_ && credit && room_for_frame_locked()) {
             render_busy_ = true;
             actions.schedule_render = true;
         }
@@ -440,7 +456,8 @@ void StreamSession::choose_write_locked(Actions& actions) {
 }
 
 void StreamSession::run(const Actions& actions) {
-    if (actions.schedule_render && !core_.render_pool().post([self = shared_from_this()] { self->render_next(); })) {
+    if (actions.schedule_render &&
+        !core_.render_pool().post(render_flow_, [self = shared_from_this()] { self->render_next(); })) {
         std::lock_guard lock(mutex_);
         render_busy_ = false;
     }

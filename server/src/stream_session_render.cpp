@@ -119,9 +119,9 @@ void StreamSession::render(PendingPose pose) {
 
     v1::Frame frame =
         rendered_frame(pose.frame, setup_.encode.format, image, frame_stats, {pose.received, begin, rendered});
-    const bool posted =
-        core_.encode_pool().post([self = shared_from_this(), image = std::move(image), frame = std::move(frame),
-                                  received = pose.received, view = pose.frame.camera.pose]() mutable {
+    const bool posted = core_.encode_pool().post(
+        encode_flow_, [self = shared_from_this(), image = std::move(image), frame = std::move(frame),
+                       received = pose.received, view = pose.frame.camera.pose]() mutable {
             if (const grpc::Status status = encode_frame(image, self->setup_.encode, received, frame); !status.ok()) {
                 frame.mutable_error()->set_code(static_cast<int>(status.error_code()));
                 frame.mutable_error()->set_message(status.error_message());

@@ -34,8 +34,8 @@ struct ServerOptions {
     std::string backend = "cpu";
     std::string precision = "float";
     int render_threads = 0;  ///< CPU backend threads per render (0: all cores)
-    int render_workers = 2;  ///< sessions rendering at once
-    int encode_workers = 2;  ///< encoder threads
+    int render_workers = 0;  ///< sessions rendering at once (0: auto_worker_counts)
+    int encode_workers = 0;  ///< encoder threads (0: auto_worker_counts)
     Limits limits;
     std::string tls_cert_file, tls_key_file, tls_client_ca_file;
     std::string bearer_token;  ///< empty: no token required
@@ -48,6 +48,11 @@ struct ServerOptions {
     int drain_ms = 5000;
     /// After the drain: time given to unary calls still running before they are cancelled.
     int shutdown_grace_ms = 5000;
+    /// The web endpoint (docs/web.md): HTTP(S) and WebSocket on this host:port, with the
+    /// same TLS and token as gRPC. Empty: none.
+    std::string web_address;
+    /// The viewer's static files, served by the web endpoint.
+    std::string web_root;
     /// Tests only: makes the renderers instead of make_renderer(backend, ...), e.g. to
     /// simulate a device that runs out of memory.
     std::function<std::unique_ptr<Renderer>()> renderer_factory;
@@ -71,6 +76,26 @@ struct ServerStats {
     std::uint64_t out_of_memory = 0;         ///< sessions and loads refused for memory
     int pooled_renderers = 0;                ///< idle renderers kept for unary renders (gauge)
 };
+
+/// The worker counts that 0 (auto) stands for, sized from the machine: `cores` (0: unknown,
+/// taken as 1) and the backend. One server drives one GPU (one server per GPU, deploy/).
+/// - render: CUDA kRenderWorkersPerGpu, so that several sessions' frames overlap on the GPU
+///   (its stages of one frame leave it idle between kernels and during copies); CPU two (one
+///   on one core): each render already spreads over --render-threads cores, and the second
+///   lets a small viewer's render start beside a large one instead of behind it.
+/// - encode: the cores the renders leave, at least kMinEncodeWorkers and at most
+///   `max_sessions` (a session encodes one frame at a time, so more would idle). The CPU
+///   backend's renders take every core: it gets kMinEncodeWorkers.
+struct WorkerCounts {
+    int render = 0, encode = 0;
+};
+inline constexpr int kRenderWorkersPerGpu = 4;
+/// Two: a session encodes one frame at a time, so a large encode (PNG) of one session never
+/// makes another session's frame wait for a worker.
+inline constexpr int kMinEncodeWorkers = 2;
+WorkerCounts auto_worker_counts(const std::string& backend, int cores, int max_sessions);
+/// What --help says 0 means, in the terms above.
+std::string auto_worker_counts_help();
 
 class StreamSession;
 

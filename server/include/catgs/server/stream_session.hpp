@@ -17,8 +17,17 @@
 //   StreamStats.frame_requests_delayed tells it so;
 // - credits: at most max_unacked_frames frames rendered but not acknowledged by the client
 //   (FrameRequest.last_received_sequence); while over budget nothing is rendered;
-// - output: one frame in flight in gRPC plus one waiting; a newer encoded frame replaces the
-//   waiting one (frames_coalesced). Error frames queue separately, at most a few;
+// - output: one frame in flight in gRPC plus one waiting. A render starts only when its frame
+//   will be written: with credit AND a free output place, counting the frames being rendered
+//   or encoded (room_for_frame_locked), so no frame is rendered to be replaced unsent. A client
+//   that acknowledges everything but never reads thus costs at most two renders, then none
+//   until the stall watchdog ends it; its newer poses are coalesced meanwhile. (A newer encoded
+//   frame still replaces a waiting one, frames_coalesced, should one ever overtake it.) Error
+//   frames queue separately, at most a few;
+// - scheduling: the session is one flow of the render pool and one of the encoder pool
+//   (worker_pool.hpp): at most one render and one encode of it run at a time, in order, and
+//   the pools take the next task from the flow that has used the least worker time, so a
+//   small viewer's frame never waits behind the backlog of a large or greedy one;
 // - stalls: a frame in flight longer than Limits::stall_timeout_ms (the client stopped
 //   reading) gets the call cancelled by the server's watchdog (cancel_if_stalled), and a call
 //   still without its opening message after Limits::open_timeout_ms is finished
@@ -140,6 +149,9 @@ private:
     bool ready_to_finish_locked() const { return phase_ == Phase::finishing && !under_way_.any(); }
     /// The client half-closed and everything it asked for has been answered: the stream ends OK.
     bool served_locked() const;
+    /// A frame rendered now would be written, not replaced unsent: the output's places (one in
+    /// gRPC's hands, one waiting) are not all taken by frames written, waiting or on the way.
+    bool room_for_frame_locked() const;
     void plan_locked(Actions& actions);
     void choose_write_locked(Actions& actions);
     void request_finish_locked(const grpc::Status& status);
@@ -197,6 +209,9 @@ private:
     std::uint64_t newest_image_sequence_ = 0;  // newest image frame queued or written
     int buffered_frames_ = 0;
     std::int64_t buffered_bytes_ = 0;
+
+    // This session's shares of the render and encoder pools (see scheduling above).
+    WorkerPool::Flow render_flow_, encode_flow_;
 
     TokenBucket pose_rate_;  // while under_way_.postponed_read the next read waits on read_alarm_
     std::unique_ptr<grpc::Alarm> read_alarm_;
