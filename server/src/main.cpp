@@ -15,6 +15,7 @@
 #include "catgs/common/files.hpp"
 #include "catgs/error.hpp"
 #include "catgs/renderer.hpp"
+#include "catgs/server/encoder.hpp"
 #include "catgs/server/server.hpp"
 
 namespace {
@@ -39,12 +40,21 @@ int main(int argc, char** argv) {
     std::uint64_t max_scene_mb = 0, max_session_mb = 0;
     std::string token_file, log_level = "info";
     bool no_reflection = false;
+    std::string jpeg_encoder = "auto";
+    catgs::server::EncoderOptions encoder_options;
 
     CLI::App app{"catgs-server: streams rendered 3D Gaussian Splatting frames over gRPC (catgs.v1)"};
     app.add_option("--address", o.address, "listen address host:port (port 0 picks a free one; it is printed)")
         ->capture_default_str();
     app.add_option("--health-address", o.health_address,
                    "extra plaintext listener serving only grpc.health.v1 (for Kubernetes probes)");
+    o.web_root = CATGS_DEFAULT_WEB_ROOT;
+    app.add_option("--web-address", o.web_address,
+                   "serve the browser viewer, /api/ unary calls and the /ws/stream WebSocket on this host:port "
+                   "(HTTPS/WSS with --tls-cert, the same --token-file; port 0 picks a free one; off by default; "
+                   "docs/web.md)");
+    app.add_option("--web-root", o.web_root, "the viewer's static files, served by --web-address")
+        ->capture_default_str();
     app.add_option("--scene-root", o.scene_root, "directory that SceneService.LoadScene paths are resolved in");
     app.add_option(
         "--scene", scenes,
@@ -55,8 +65,17 @@ int main(int argc, char** argv) {
     app.add_option("--precision", o.precision, "float or double")->capture_default_str();
     app.add_option("--render-threads", o.render_threads, "CPU backend: threads per render (0: all cores)")
         ->capture_default_str();
-    app.add_option("--render-workers", o.render_workers, "sessions rendering at the same time")->capture_default_str();
-    app.add_option("--encode-workers", o.encode_workers, "JPEG/PNG encoder threads")->capture_default_str();
+    app.add_option("--render-workers", o.render_workers,
+                   "sessions rendering at the same time (" + catgs::server::auto_worker_counts_help() + ")")
+        ->capture_default_str();
+    app.add_option("--encode-workers", o.encode_workers, "JPEG/PNG encoder threads (0: auto, see --render-workers)")
+        ->capture_default_str();
+    app.add_option("--jpeg-encoder", jpeg_encoder,
+                   "auto (nvJPEG when built in and a GPU is usable, else TurboJPEG), turbo or nvjpeg")
+        ->capture_default_str();
+    app.add_option("--encode-threads", encoder_options.threads,
+                   "threads one frame's JPEG strips or PNG chunks are spread over (0: all cores)")
+        ->capture_default_str();
     app.add_option("--max-sessions", o.limits.max_sessions, "concurrent sessions (per GPU)")->capture_default_str();
     app.add_option("--max-width", o.limits.max_width, "largest image width a session may request")
         ->capture_default_str();
@@ -125,10 +144,13 @@ int main(int argc, char** argv) {
         if (o.limits.max_sessions < 1) throw catgs::Error("--max-sessions must be >= 1");
         if (o.limits.max_width < 1 || o.limits.max_height < 1)
             throw catgs::Error("--max-width/--max-height must be >= 1");
-        if (o.render_workers < 1 || o.encode_workers < 1)
-            throw catgs::Error("--render-workers/--encode-workers must be >= 1");
+        if (o.render_workers < 0 || o.encode_workers < 0)
+            throw catgs::Error("--render-workers/--encode-workers must be >= 0 (0: auto)");
         if (!o.bearer_token.empty() && o.tls_cert_file.empty())
             spdlog::warn("bearer token over plaintext: anyone on the path can read it; use --tls-cert/--tls-key");
+        encoder_options.jpeg = catgs::server::parse_jpeg_encoder(jpeg_encoder);
+        catgs::server::configure_encoder(encoder_options);
+        spdlog::info("jpeg encoder: {}", catgs::server::jpeg_encoder_name(catgs::server::configured_jpeg_encoder()));
         server = std::make_unique<catgs::server::Server>(o);
         server->start();
         return catgs::kExitOk;
@@ -136,6 +158,7 @@ int main(int argc, char** argv) {
     if (started != catgs::kExitOk) return started;
     // For scripts and tests that start the server on port 0.
     std::printf("catgs-server: listening on port %d\n", server->port());
+    if (!server->web_url().empty()) std::printf("catgs-server: web viewer on %s\n", server->web_url().c_str());
     std::fflush(stdout);
 
     std::thread waiter([&] {

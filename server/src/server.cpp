@@ -16,6 +16,7 @@
 #include "catgs/common/net_config.hpp"
 #include "catgs/server/services.hpp"
 #include "catgs/server/stream_session.hpp"
+#include "catgs/server/web_endpoint.hpp"
 
 namespace catgs::server {
 namespace {
@@ -84,6 +85,13 @@ bool wait_until(Done done, std::chrono::milliseconds wait) {
     }
     return true;
 }
+
+/// Web connections beyond --max-sessions: page loads, scene calls and refused streams need
+/// connections too, without holding a session.
+constexpr int kWebConnectionMargin = 32;
+/// A browser's frame write may outlast the session's stall watchdog by this much: the
+/// watchdog ends the call first (and counts the stall), then the endpoint frees the socket.
+constexpr std::chrono::milliseconds kWebStallMargin{1000};
 
 /// Service names whose health is reported (plus "", the whole server).
 const char* const kServiceNames[] = {"catgs.v1.RenderService", "catgs.v1.SceneService"};
@@ -160,6 +168,17 @@ void Server::start() {
             throw Error("--health-address '" + o.health_address + "': cannot listen there");
         set_health(health_server_.get(), true);
     }
+    if (!o.web_address.empty()) {
+        // A client of this server's own services: every stream session rule applies to browsers.
+        WebOptions web{o.web_address, o.web_root, o.tls_cert_file, o.tls_key_file,
+                       o.limits.max_sessions + kWebConnectionMargin};
+        if (o.limits.stall_timeout_ms > 0)
+            web.frame_write_timeout = std::chrono::milliseconds(o.limits.stall_timeout_ms) + kWebStallMargin;
+        web_ = std::make_unique<WebEndpoint>(web, server_->InProcessChannel(net::client_channel_args()),
+                                             [this] { return !core_->admission().draining(); });
+        web_->start();
+        spdlog::info("web viewer on {} (WebSocket /ws/stream, web root {})", web_->url(), o.web_root);
+    }
     spdlog::info(
         "catgs-server listening on port {} ({}, backend {}, {} render workers, {} encoders, max {} sessions){}", port_,
         o.tls_cert_file.empty() ? "plaintext" : "TLS", o.backend, o.render_workers, o.encode_workers,
@@ -187,6 +206,8 @@ void Server::shutdown(std::chrono::milliseconds grace) {
         if (stopped_) return;
     }
     end_streams(std::min(grace, kDrainWriteWait));
+    // Before gRPC stops: the web endpoint's calls run on its in-process channel.
+    if (web_) web_->stop();
     const auto deadline = std::chrono::system_clock::now() + grace;
     // Streams have ended above; unary calls (scene loads, renders) get until the deadline, and
     // so do clients to close their connections after gRPC's GOAWAY.
@@ -220,6 +241,14 @@ void Server::end_streams(std::chrono::milliseconds wait) {
     // Their trailers must be on the wire before the server closes the connections.
     if (!wait_until(all_ended, kCancelWait))
         spdlog::warn("{} stream(s) still open after their cancel", core_->streams().size());
+}
+
+int Server::web_port() const {
+    return web_ ? web_->port() : 0;
+}
+
+std::string Server::web_url() const {
+    return web_ ? web_->url() : std::string();
 }
 
 void Server::wait() {

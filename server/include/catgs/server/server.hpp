@@ -15,6 +15,7 @@ namespace catgs::server {
 
 class RenderServiceImpl;
 class SceneServiceImpl;
+class WebEndpoint;
 
 class Server {
 public:
@@ -27,6 +28,9 @@ public:
     /// The bound ports (useful with ":0" addresses); 0 when there is no such listener.
     int port() const { return port_; }
     int health_port() const { return health_port_; }
+    /// The web endpoint's port and the URL to open (0 and "" without --web-address).
+    int web_port() const;
+    std::string web_url() const;
 
     /// First half of shutdown, returns at once: health turns NOT_SERVING, new sessions are
     /// refused with UNAVAILABLE, open streams end with UNAVAILABLE asking clients to reconnect.
@@ -58,6 +62,7 @@ private:
     std::unique_ptr<grpc::Server> server_;
     std::unique_ptr<grpc::CallbackGenericService> health_generic_;
     std::unique_ptr<grpc::Server> health_server_;
+    std::unique_ptr<WebEndpoint> web_;
     int port_ = 0, health_port_ = 0;
     std::mutex mutex_;  // a leaf, released before calling into the core (lock order: server_core.hpp)
     std::condition_variable stopped_cv_;
