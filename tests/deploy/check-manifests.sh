@@ -190,6 +190,11 @@ if [ $mutations = 1 ]; then
     "deploy/Dockerfile|RUN cmake -S . -B build |RUN cmake -S . -B out |cmake -S . -B build"
     "deploy/Dockerfile|HEALTHCHECK --interval=15s|HEALTHCHECK --interval=15q|deploy/Dockerfile:"
     "deploy/Dockerfile|build/renderer/catgs-bench|build/renderer/catgs-benchmark|no add_executable(catgs-benchmark)"
+    "deploy/k8s/envoy.yaml|(- upgrade_type: websocket\n\s+)enabled: true|\\1enabled: false|needs upgrade_configs [{upgrade_type: websocket}]"
+    "deploy/envoy-host.yaml|name: session\n|name: sid\n|must hash on query_parameter 'session'"
+    "deploy/k8s/envoy.yaml|path: /healthz|path: /|HTTP health check on /healthz"
+    "deploy/docker/compose.yaml|--web-address=127.0.0.1:8182|--web-address=127.0.0.1:8183|catgs_web endpoints"
+    "deploy/k8s/catgs-server-deployment.yaml|- 0.0.0.0:8088|- 0.0.0.0:8089|--web-address must listen on containerPort web"
     "README.md|(<!-- main-command -->\n\`\`\`\nbash deploy/install-deps.sh && )cmake -S . -B build|\\1cmake -S . -B build-release|has no 'cmake -S . -B build'"
   )
   echo "--- mutations: ${#cases[@]} broken copies, each must fail"

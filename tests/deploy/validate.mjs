@@ -470,9 +470,12 @@ function checkEnvoy(where, text) {
   }
   check(leastRequest, where, "no route goes to a LEAST_REQUEST cluster");
   check(affinity && affinity.header === "x-catgs-session", where, "no route hashes on the x-catgs-session header");
-  check(routes.at(-1)?.route && !(routes.at(-1).match?.headers?.length), where, "the last route must be the catch-all without header match");
+  const grpcRoutes = routes.filter((r) => r.route && r.match?.grpc);
+  check(grpcRoutes.at(-1) && !(grpcRoutes.at(-1).match?.headers?.length), where, "the last gRPC route must be the catch-all without header match");
+  const webCluster = checkEnvoyWeb(where, hcm, routes, clusters);
   for (const c of sr.clusters) {
     const cw = `${where} cluster ${c.name}`;
+    if (c === webCluster) continue;
     const http2 = c.typed_extension_protocol_options?.["envoy.extensions.upstreams.http.v3.HttpProtocolOptions"]?.explicit_http_config?.http2_protocol_options;
     if (!check(http2, cw, "upstream must be HTTP/2 (typed_extension_protocol_options ... explicit_http_config.http2_protocol_options)")) continue;
     const ka = durationSeconds(http2.connection_keepalive?.interval);
@@ -489,11 +492,42 @@ function checkEnvoy(where, text) {
       check(f === undefined || (Number.isInteger(f) && f >= 100), cw, "hash_balance_factor must be an integer >= 100");
     }
   }
-  // The two clusters must see the same servers.
+  // The two gRPC clusters must see the same servers, and the web cluster the same hosts.
+  const grpcClusters = sr.clusters.filter((c) => c !== webCluster);
   const endpointSet = (c) => JSON.stringify((c.load_assignment?.endpoints || []).flatMap((e) => e.lb_endpoints || []).map((e) => [e.endpoint?.address?.socket_address, e.endpoint?.health_check_config]));
-  const sets = new Set(sr.clusters.map(endpointSet));
-  check(sets.size === 1, where, "every cluster must list the same endpoints (one set of servers, two balancing policies)");
-  return { cfg, hcms, clusters: sr.clusters, grpcListener: grpcHcm.listener };
+  const sets = new Set(grpcClusters.map(endpointSet));
+  check(sets.size === 1, where, "every gRPC cluster must list the same endpoints (one set of servers, two balancing policies)");
+  const hostsOf = (c) => JSON.stringify((c?.load_assignment?.endpoints || []).flatMap((e) => e.lb_endpoints || []).map((e) => e.endpoint?.address?.socket_address?.address));
+  if (webCluster && grpcClusters[0])
+    check(hostsOf(webCluster) === hostsOf(grpcClusters[0]), where, `cluster ${webCluster.name} must list the same hosts, in the same order, as the gRPC clusters (their web ports)`);
+  return { cfg, hcms, clusters: grpcClusters, webCluster, grpcListener: grpcHcm.listener };
+}
+
+// The browser viewer (docs/web.md): /ws/ upgrades to a WebSocket, hashed on ?session= (a
+// browser cannot set x-catgs-session on a WebSocket); /api/ and, last, everything else (the
+// static files) go to the same HTTP/1.1 cluster of the servers' --web-address ports.
+function checkEnvoyWeb(where, hcm, routes, clusters) {
+  const ws = routes.find((r) => r.route && r.match?.prefix === "/ws/");
+  if (!check(ws, where, "no route for the viewer's WebSocket (match prefix /ws/)")) return null;
+  const c = clusters.get(ws.route.cluster);
+  if (!check(c, where, `route ${ws.name}: cluster '${ws.route.cluster}' is not defined`)) return null;
+  check((ws.route.upgrade_configs || []).some((u) => u.upgrade_type === "websocket" && u.enabled !== false), where, `route ${ws.name}: needs upgrade_configs [{upgrade_type: websocket}] (WebSocket upgrades are refused otherwise)`);
+  check((hcm.upgrade_configs || []).some((u) => u.upgrade_type === "websocket"), where, "the gRPC listener needs upgrade_configs with upgrade_type websocket (disabled there, enabled by the /ws/ route)");
+  check(!ws.match.grpc, where, `route ${ws.name}: a WebSocket is not a gRPC call (no grpc match)`);
+  const qp = (ws.route.hash_policy || []).find((h) => h.query_parameter);
+  check(qp?.query_parameter?.name === "session", where, `route ${ws.name}: must hash on query_parameter 'session' (the viewer's affinity key), not ${JSON.stringify(qp?.query_parameter?.name)}`);
+  check(["MAGLEV", "RING_HASH"].includes(c.lb_policy), where, `route ${ws.name}: hash_policy needs a MAGLEV or RING_HASH cluster; '${c.name}' is ${c.lb_policy}`);
+  const api = routes.find((r) => r.route && r.match?.prefix === "/api/");
+  check(api?.route.cluster === c.name, where, `the viewer's unary calls (prefix /api/) must go to ${c.name}`);
+  const last = routes.at(-1);
+  check(last?.route && last.match?.prefix === "/" && !last.match.grpc && last.route.cluster === c.name, where, `the last route must send what is not gRPC (the viewer's files) to ${c.name}`);
+  const cw = `${where} cluster ${c.name}`;
+  const opts = c.typed_extension_protocol_options?.["envoy.extensions.upstreams.http.v3.HttpProtocolOptions"]?.explicit_http_config;
+  check(opts?.http_protocol_options && !opts.http2_protocol_options, cw, "upstream must be HTTP/1.1 (explicit_http_config.http_protocol_options): the web endpoint upgrades WebSockets over HTTP/1.1");
+  check(c.common_lb_config?.healthy_panic_threshold?.value === 0, cw, "healthy_panic_threshold must be 0 (never send calls to unhealthy or draining servers)");
+  check(c.health_checks?.[0]?.http_health_check?.path === "/healthz", cw, "needs an HTTP health check on /healthz (503 from the start of a drain)");
+  check(c.load_assignment?.cluster_name === c.name, cw, "load_assignment.cluster_name must equal the cluster name");
+  return c;
 }
 
 const envoyHost = checkEnvoy("deploy/envoy-host.yaml", readText("deploy/envoy-host.yaml"));
@@ -608,6 +642,15 @@ function checkBase(objs) {
     check(ready && port === ready.listener.address.socket_address.port_value && p.path === readyPath, eid, `${probe} must GET ${readyPath} on Envoy's health-check listener`);
   }
   const fqdn = `${svc?.metadata.name}.${svc?.metadata.namespace}.svc.cluster.local`;
+  if (env.webCluster) {
+    const cw = `deploy/k8s/envoy.yaml cluster ${env.webCluster.name}`;
+    check(env.webCluster.type === "STRICT_DNS", cw, "must be STRICT_DNS over the headless Service");
+    check(ports.web && portOf(flagValue(argv, "--web-address") || "") === ports.web, sid, `--web-address must listen on containerPort web (${ports.web})`);
+    for (const e of (env.webCluster.load_assignment?.endpoints || []).flatMap((x) => x.lb_endpoints || [])) {
+      const sa = e.endpoint?.address?.socket_address;
+      check(sa?.address === fqdn && sa?.port_value === ports.web, cw, `endpoint must be ${fqdn}:${ports.web} (catgs-server's web port), is ${sa?.address}:${sa?.port_value}`);
+    }
+  }
   for (const cl of env.clusters) {
     check(cl.type === "STRICT_DNS", `deploy/k8s/envoy.yaml cluster ${cl.name}`, "must be STRICT_DNS over the headless Service");
     for (const e of (cl.load_assignment?.endpoints || []).flatMap((x) => x.lb_endpoints || [])) {
@@ -652,7 +695,7 @@ function checkCompose() {
   // Each server service: its flags exist, it listens where deploy/envoy-host.yaml expects, and
   // its health check probes its own health port.
   const eps = envoyHost.clusters[0].load_assignment.endpoints.flatMap((e) => e.lb_endpoints).map((e) => `${e.endpoint.address.socket_address.port_value}/${e.endpoint.health_check_config.port_value}`);
-  const seen = [];
+  const seen = [], webSeen = [];
   for (const [name, s] of Object.entries(doc?.services || {})) {
     const argv = [...(s.entrypoint || []), ...(s.command || [])].map(String);
     if (argv[0] !== "/opt/catgs/bin/catgs-server") continue;
@@ -661,11 +704,14 @@ function checkCompose() {
     const health = portOf(flagValue(argv, "--health-address"));
     check(/^127\.0\.0\.1:/.test(flagValue(argv, "--address") || ""), `${where} ${name}`, "servers listen on 127.0.0.1 only; Envoy is the public port");
     seen.push(`${grpc}/${health}`);
+    webSeen.push(portOf(flagValue(argv, "--web-address") || ""));
     const probe = (s.healthcheck?.test || []).slice(1);
     check(probe[0] === "/opt/catgs/bin/catgs-health-probe" && portOf(flagValue(probe, "--addr") || "") === health, `${where} ${name}`, `healthcheck must probe its own health port ${health}`);
     check(s.network_mode === "host", `${where} ${name}`, "network_mode must be host (deploy/envoy-host.yaml reaches servers on 127.0.0.1)");
   }
   check(JSON.stringify([...seen].sort()) === JSON.stringify([...eps].sort()), where, `servers listen on ${seen.join(", ")} (grpc/health) but deploy/envoy-host.yaml expects ${eps.join(", ")}`);
+  const webEps = (envoyHost.webCluster?.load_assignment?.endpoints || []).flatMap((e) => e.lb_endpoints || []).map((e) => e.endpoint?.address?.socket_address?.port_value);
+  check(JSON.stringify(webSeen) === JSON.stringify(webEps), where, `servers' --web-address ports ${webSeen.join(", ")} differ from deploy/envoy-host.yaml's catgs_web endpoints ${webEps.join(", ")}`);
   const envoy = Object.values(doc?.services || {}).find((s) => String(s.image || "").startsWith("envoyproxy/envoy:"));
   check(envoy && (envoy.volumes || []).some((v) => String(v).startsWith("../envoy-host.yaml:")), where, "the envoy service must mount ../envoy-host.yaml");
   const k8sEnvoyImage = (base || []).flatMap((o) => containersOf(o)).find((c) => c.name === "envoy")?.image;
