@@ -102,10 +102,10 @@ job_asan() {
 job_tsan() {
   local dir=$BUILD_ROOT/build-tsan
   build() {
-    configure "$dir" thread -DCATGS_FUZZ=OFF && cmake --build "$dir" -j"$JOBS" --target catgs_server_tests catgs-server
+    configure "$dir" thread -DCATGS_FUZZ=OFF && cmake --build "$dir" -j"$JOBS" --target catgs_server_tests catgs_encoder_tests catgs-server
   }
   step "tsan: configure+build server tests" "$dir" build || return
-  step "tsan: ctest -L server" "catgs_server_tests + catgs-server, TSan" tsan_tests "$dir"
+  step "tsan: ctest -L server" "catgs_server_tests, catgs_encoder_tests + catgs-server, TSan" tsan_tests "$dir"
 }
 
 # The server suite under TSan, which slows it ~5-10x. A test that fails WITHOUT a TSan report
