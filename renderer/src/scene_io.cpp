@@ -2,13 +2,11 @@
 
 #include "catgs/scene_io.hpp"
 
-#include <algorithm>
-#include <cctype>
-#include <filesystem>
 #include <string>
 #include <string_view>
 
 #include "catgs/builtin_city.hpp"
+#include "catgs/scene_format.hpp"
 #include "catgs/scene_ops.hpp"
 #include "scene_io_detail.hpp"
 
@@ -17,12 +15,6 @@ namespace catgs {
 namespace {
 
 constexpr std::string_view kBuiltinPrefix = "builtin:";
-
-std::string lower(std::string text) {
-    std::transform(text.begin(), text.end(), text.begin(),
-                   [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
-    return text;
-}
 
 }  // namespace
 
@@ -34,11 +26,7 @@ Scene open_scene(const std::string& spec, const LoadOptions& options, LoadReport
         if (report) *report = LoadReport{.records = scene.count()};
         return scene;
     }
-    const std::string extension = lower(std::filesystem::path(spec).extension().string());
-    if (extension == ".ply") return read_ply(spec, options, report);
-    if (extension == ".splat") return read_splat(spec, options, report);
-    io::fail(spec, "unknown scene format; expected a .ply or .splat file or builtin:city",
-             extension.empty() ? "no file extension" : "extension " + io::quote(extension));
+    return read_scene_file(spec, options, report);
 }
 
 }  // namespace

@@ -16,6 +16,14 @@
 
 namespace catgs {
 
+/// The axes a .spz file's data is in. The format has no field for it: Niantic's library writes
+/// RUB (x right, y up, z back: its documented convention), splat-transform 3.7.0 writes the
+/// PLY's RDF values unconverted (`from: UNSPECIFIED`) and reads them back the same way.
+enum class SpzAxes {
+    rdf,  ///< as splat-transform writes: no conversion
+    rub,  ///< as Niantic's spz library writes: y and z flip to reach catgs' RDF
+};
+
 struct LoadOptions {
     /// Records with non-finite values or a zero-norm quaternion are an error by default;
     /// with this set they are dropped and counted in LoadReport::dropped_invalid.
@@ -31,6 +39,8 @@ struct LoadOptions {
     /// for it. The default leaves only the bound the file size sets; fuzz targets and
     /// memory-capped callers lower it.
     std::uint64_t max_records = std::numeric_limits<std::uint64_t>::max();
+    /// read_spz: the axes of the file's data (see SpzAxes).
+    SpzAxes spz_axes = SpzAxes::rdf;
     Progress progress;
 };
 
@@ -54,6 +64,43 @@ Scene read_ply(const std::string& path, const LoadOptions& options = {}, LoadRep
 /// in (w, x, y, z) order. SH degree 0.
 Scene read_splat(const std::string& path, const LoadOptions& options = {}, LoadReport* report = nullptr);
 
+/// Niantic .spz, versions 2 and 3 (one gzip stream: a 16-byte header, then every Gaussian's
+/// position, then every alpha, colour, scale, rotation and SH block). Positions are 24-bit
+/// fixed point, scales log(s) = byte / 16 - 10, alpha linear byte / 255, colour f_dc =
+/// (byte / 255 - 0.5) / 0.15, rotations (x, y, z) bytes with w >= 0 derived (v2) or the
+/// smallest three in 10 bits (v3), SH coefficients (byte - 128) / 128 with the channel the
+/// fastest axis. The header's SH degree (0..3) is the scene's. options.spz_axes says whether
+/// to convert from RUB. The decompressed size is checked against the header's count before
+/// anything is inflated past it, so a gzip bomb costs no more than the count it declares.
+Scene read_spz(const std::string& path, const LoadOptions& options = {}, LoadReport* report = nullptr);
+
+/// SuperSplat's compressed PLY (.compressed.ply): binary little-endian PLY with an element
+/// `chunk` of per-256-Gaussian float bounds (min/max x, y, z, scale_x..z and optionally r, g,
+/// b), an element `vertex` of uint32 packed_position (11/10/11 bits), packed_rotation (2-bit
+/// largest-component index and three 10-bit components), packed_scale (11/10/11, log) and
+/// packed_color (RGBA 8 bits), and an optional element `sh` of uint8 f_rest_* (9, 24 or 45:
+/// SH degree 1..3). Stored in the PLY's RDF axes.
+Scene read_compressed_ply(const std::string& path, const LoadOptions& options = {}, LoadReport* report = nullptr);
+
+/// PlayCanvas SOG, meta.json version 2 (splat-transform's): a .sog zip of WebP textures and
+/// meta.json, or an unbundled meta.json whose textures are plain file names beside it.
+/// Positions are 16-bit steps of sign(v) ln(|v| + 1) between means.mins and maxs, scales and
+/// f_dc index 256-entry codebooks, opacity is linear byte / 255, quaternions the smallest
+/// three plus a largest-component tag, SH (shN.bands 1..3, the scene's degree) a palette of
+/// codebook-indexed centroids picked by a 16-bit label. Stored in the PLY's RDF axes. Every
+/// zip entry and texture is checked against what meta.json's count needs before it is
+/// inflated or decoded; version 1 (no 'version' key) is refused.
+Scene read_sog(const std::string& path, const LoadOptions& options = {}, LoadReport* report = nullptr);
+
+/// glTF 2.0 binary (.glb) with KHR_gaussian_splatting primitives (as splat-transform 3.7.0
+/// writes): POSITION, KHR_gaussian_splatting:ROTATION (x, y, z, w), :SCALE (linear), :OPACITY
+/// (linear) and :SH_DEGREE_l_COEF_c (f_dc and f_rest, VEC3 per coefficient; the highest
+/// complete degree is the scene's), float or normalised integer accessors. glTF's axes are
+/// LUF (+x left, +y up, +z forward); they are turned 180 degrees about z into the PLY's RDF,
+/// rotating positions, quaternions and SH coefficients. Every primitive with the extension is
+/// read; node transforms and buffers in other files are refused.
+Scene read_glb(const std::string& path, const LoadOptions& options = {}, LoadReport* report = nullptr);
+
 /// Binary little-endian graphdeco PLY. x, y, z (world coordinates: origin + position,
 /// formed in double), scale_* (log) and opacity (logit, clamped to +-40) are written as
 /// double, so that reading the file back gives bit-identical activated floats; every other
@@ -61,7 +108,8 @@ Scene read_splat(const std::string& path, const LoadOptions& options = {}, LoadR
 /// bounds (as after loading with recentre) or zero.
 void write_ply(const Scene& scene, const std::string& path);
 
-/// Opens a scene from a path (.ply or .splat, chosen by extension) or a generator spec
+/// Opens a scene from a path (the format recognised by content, .splat by extension: see
+/// scene_format.hpp) or a generator spec
 /// "builtin:city?gaussians=N&seed=S" (see builtin_city.hpp), partitioned into spatial chunks
 /// unless options.chunks is off (Gaussian order then changes; see partition_into_chunks).
 Scene load_scene(const std::string& spec, const LoadOptions& options = {}, LoadReport* report = nullptr);
