@@ -329,7 +329,10 @@ int run(const Options& o) {
 int main(int argc, char** argv) {
     Options o;
     CLI::App app{"catgs-bench: per-stage timings of a renderer along a camera path, and time against error"};
-    app.add_option("--scene", o.scene, "PLY or .splat file, or builtin:city?gaussians=N&seed=S")->capture_default_str();
+    app.add_option("--scene", o.scene,
+                   "scene file (PLY, compressed PLY, .splat, .spz, .sog, meta.json, .glb: docs/scene-formats.md), or "
+                   "builtin:city?gaussians=N&seed=S")
+        ->capture_default_str();
     app.add_option("--sh-degree", o.sh_degree,
                    "render with the SH coefficients above this degree (0..3) dropped; 0: view-independent colour "
                    "(default: the scene's degree)")

@@ -189,7 +189,10 @@ int run(const Options& o) {
 int main(int argc, char** argv) {
     Options o;
     CLI::App app{"catgs-render: render a 3D Gaussian Splatting scene along a camera path"};
-    app.add_option("--scene", o.scene, "PLY or .splat file, or builtin:city?gaussians=N&seed=S")->capture_default_str();
+    app.add_option("--scene", o.scene,
+                   "scene file (PLY, compressed PLY, .splat, .spz, .sog, meta.json, .glb: docs/scene-formats.md), or "
+                   "builtin:city?gaussians=N&seed=S")
+        ->capture_default_str();
     app.add_option("--cameras", o.cameras, "graphdeco cameras.json (uses its own intrinsics)");
     app.add_option("--trajectory", o.trajectory,
                    "trajectory file, or builtin:survey|orbit|flythrough|hover?speed=&fps=&altitude=&pitch=&frames= "

@@ -20,6 +20,8 @@ constexpr std::size_t kMaxSceneIdLength = 128;
 /// Host bytes per Gaussian of a degree-3 scene (position 3, scale 3, rotation 4, opacity 1,
 /// 48 SH floats): the upper bound used to refuse an over-limit load before allocating it.
 constexpr std::uint64_t kMaxBytesPerGaussian = sizeof(float) * (3 + 3 + 4 + 1 + 48);
+/// The least a loaded Gaussian costs: position, scale, rotation, opacity and SH degree 0.
+constexpr std::uint64_t kMinBytesPerGaussian = sizeof(float) * (3 + 3 + 4 + 1 + 3);
 
 SceneSummary summarize(const std::string& id, const std::string& source, const Scene& scene) {
     SceneSummary s;
@@ -171,6 +173,10 @@ grpc::Status SceneRegistry::load(const std::string& requested_id, const std::str
     try {
         LoadOptions options;
         options.drop_invalid = drop_invalid;
+        // A compressed file (.spz, SOG, compressed PLY) may declare far more Gaussians than
+        // its size suggests: the readers refuse a count the memory limit cannot hold before
+        // they allocate for it.
+        if (max_scene_bytes_ > 0) options.max_records = max_scene_bytes_ / kMinBytesPerGaussian;
         scene = std::make_shared<const Scene>(load_scene(path, options));
     } catch (const Error& e) {
         // The message names the file by the path the server used; clients get their own.
