@@ -177,7 +177,8 @@ TEST(JpegStrips, StripCountFollowsThreadsAndSize) {
 class PngVariants : public ::testing::TestWithParam<std::pair<int, int>> {};
 
 TEST_P(PngVariants, DecodeExactly) {
-    const auto [w, h] = GetParam();
+    // Not a structured binding: clang 14 cannot capture one in the lambda below.
+    const int w = GetParam().first, h = GetParam().second;
     const ImageRGB8 image = test_image(w, h, 3u * w + h);
     EncodePool pool(3);
     std::string out;
