@@ -56,15 +56,6 @@ std::string sanitized_header(beast::string_view value) {
     return web::is_metadata_safe(out) ? out : std::string();
 }
 
-std::string byte_buffer_to_string(const grpc::ByteBuffer& buffer) {
-    std::vector<grpc::Slice> slices;
-    std::string out;
-    if (!buffer.Dump(&slices).ok()) return out;
-    out.reserve(buffer.Length());
-    for (const grpc::Slice& s : slices) out.append(reinterpret_cast<const char*>(s.begin()), s.size());
-    return out;
-}
-
 std::string etag_of(const std::string& path) {
     std::error_code ec;
     const auto size = std::filesystem::file_size(path, ec);
@@ -356,6 +347,15 @@ private:
 };
 
 }  // namespace
+
+std::string byte_buffer_to_string(const grpc::ByteBuffer& buffer) {
+    std::vector<grpc::Slice> slices;
+    std::string out;
+    if (!buffer.Dump(&slices).ok()) return out;
+    out.reserve(buffer.Length());
+    for (const grpc::Slice& s : slices) out.append(reinterpret_cast<const char*>(s.begin()), s.size());
+    return out;
+}
 
 std::string request_token(const HttpRequest& request) {
     static const std::string kBearer = "Bearer ";

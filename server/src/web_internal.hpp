@@ -135,5 +135,8 @@ std::string request_token(const HttpRequest& request);
 /// the session) and its affinity key (?session=).
 bool add_call_metadata(grpc::ClientContext* context, const HttpRequest& request, const std::string& peer,
                        grpc::Status* refused);
+/// The bytes of a message the bridge got from the in-process call, as one string (empty if
+/// the buffer cannot be read).
+std::string byte_buffer_to_string(const grpc::ByteBuffer& buffer);
 
 }  // namespace catgs::server

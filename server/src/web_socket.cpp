@@ -28,15 +28,6 @@ namespace websocket = beast::websocket;
 
 constexpr const char* kStreamMethod = "/catgs.v1.RenderService/Stream";
 
-std::string to_string(const grpc::ByteBuffer& buffer) {
-    std::vector<grpc::Slice> slices;
-    std::string out;
-    if (!buffer.Dump(&slices).ok()) return out;
-    out.reserve(buffer.Length());
-    for (const grpc::Slice& s : slices) out.append(reinterpret_cast<const char*>(s.begin()), s.size());
-    return out;
-}
-
 template <class Stream>
 class WsSession final : public web::Connection,
                         public grpc::ClientBidiReactor<grpc::ByteBuffer, grpc::ByteBuffer>,
@@ -151,7 +142,7 @@ private:
     void on_frame(bool ok) {
         if (!ok) return release_hold();  // the session finished; its status follows in OnDone
         if (ws_gone_ || hold_released_) return;
-        frame_ = to_string(from_server_);
+        frame_ = byte_buffer_to_string(from_server_);
         from_server_.Clear();
         writing_ = true;
         if (const auto timeout = endpoint_.options.frame_write_timeout; timeout.count() > 0) {
