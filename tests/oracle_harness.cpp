@@ -8,6 +8,8 @@
 #include <cerrno>
 #include <chrono>
 #include <cstring>
+#include <random>
+#include <cmath>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
@@ -185,6 +187,31 @@ bool convert_all(const std::vector<Conversion>& conversions) {
         if (done < 0) break;  // no children left that we know of: nothing more to wait for
     }
     return ok;
+}
+
+Scene asymmetric_scene(int sh_degree, std::size_t n, unsigned seed) {
+    std::mt19937 rng(seed);
+    std::uniform_real_distribution<float> u(0.0f, 1.0f);
+    Scene s;
+    s.sh_degree = sh_degree;
+    s.resize(n);
+    for (std::size_t i = 0; i < n; ++i) {
+        s.positions[3 * i] = 1.0f + 2.0f * u(rng);
+        s.positions[3 * i + 1] = -2.0f + 0.5f * u(rng);
+        s.positions[3 * i + 2] = 4.0f + 3.0f * u(rng);
+        for (int a = 0; a < 3; ++a) s.scales[3 * i + a] = std::exp(-4.0f + 2.0f * u(rng));
+        float q[4], norm = 0;
+        for (float& c : q) {
+            c = u(rng) - 0.5f;
+            norm += c * c;
+        }
+        for (int c = 0; c < 4; ++c) s.rotations[4 * i + c] = q[c] / std::sqrt(norm);
+        s.opacities[i] = 0.1f + 0.85f * u(rng);
+        for (std::size_t k = 0; k < s.sh_floats_per_gaussian(); ++k)
+            s.sh[i * s.sh_floats_per_gaussian() + k] = (k < 3 ? 1.0f : 0.3f) * (u(rng) - 0.5f);
+    }
+    s.update_bounds();
+    return s;
 }
 
 }  // namespace catgs::oracle

@@ -9,8 +9,11 @@
 
 #include <gtest/gtest.h>
 
+#include <cstddef>
 #include <string>
 #include <vector>
+
+#include "catgs/scene.hpp"
 
 namespace catgs::oracle {
 
@@ -55,6 +58,10 @@ bool convert(const Conversion& conversion);
 /// for most of its run); false if any failed (each failure is reported).
 bool convert_all(const std::vector<Conversion>& conversions);
 inline constexpr std::size_t kParallelConversions = 2;
+
+/// Random Gaussians in a box far from symmetric about every axis (x in [1, 3], y in [-2, -1.5],
+/// z in [4, 7]), so that a flipped axis moves every Gaussian and the bounds by metres.
+Scene asymmetric_scene(int sh_degree, std::size_t n, unsigned seed);
 
 }  // namespace catgs::oracle
 

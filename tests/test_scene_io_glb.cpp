@@ -297,39 +297,14 @@ TEST(SceneIoGlb, MaxRecords) {
 // ---------------------------------------------------------------------------------------
 // Against splat-transform: lossless, so its .glb loads as the PLY it was made from.
 
-catgs::Scene random_scene(int sh_degree, std::size_t n, unsigned seed) {
-    std::mt19937 rng(seed);
-    std::uniform_real_distribution<float> u(0.0f, 1.0f);
-    catgs::Scene s;
-    s.sh_degree = sh_degree;
-    s.resize(n);
-    for (std::size_t i = 0; i < n; ++i) {
-        // Far from symmetric about every axis: a flipped axis moves every Gaussian by metres.
-        s.positions[3 * i] = 1.0f + 2.0f * u(rng);
-        s.positions[3 * i + 1] = -2.0f + 0.5f * u(rng);
-        s.positions[3 * i + 2] = 4.0f + 3.0f * u(rng);
-        for (int a = 0; a < 3; ++a) s.scales[3 * i + a] = std::exp(-4.0f + 2.0f * u(rng));
-        float q[4], norm = 0;
-        for (float& c : q) {
-            c = u(rng) - 0.5f;
-            norm += c * c;
-        }
-        for (int c = 0; c < 4; ++c) s.rotations[4 * i + c] = q[c] / std::sqrt(norm);
-        s.opacities[i] = 0.1f + 0.85f * u(rng);
-        for (std::size_t k = 0; k < s.sh_floats_per_gaussian(); ++k)
-            s.sh[i * s.sh_floats_per_gaussian() + k] = (k < 3 ? 1.0f : 0.3f) * (u(rng) - 0.5f);
-    }
-    s.update_bounds();
-    return s;
-}
-
 TEST(SceneIoGlbOracle, SplatTransformGlbLoadsAsItsSourceAtEveryShDegree) {
     CATGS_NEED_ORACLE();
     catgs::oracle::TempDir dir("glb_oracle");
     std::vector<catgs::oracle::Conversion> to_glb;
     for (int degree = 0; degree <= catgs::kMaxShDegree; ++degree) {
         const std::string d = std::to_string(degree);
-        catgs::write_ply(random_scene(degree, 300, 21 + static_cast<unsigned>(degree)), dir.path("in" + d + ".ply"));
+        catgs::write_ply(catgs::oracle::asymmetric_scene(degree, 300, 21 + static_cast<unsigned>(degree)),
+                         dir.path("in" + d + ".ply"));
         to_glb.push_back({dir.path("in" + d + ".ply"), dir.path("out" + d + ".glb"), {}});
     }
     ASSERT_TRUE(catgs::oracle::convert_all(to_glb));

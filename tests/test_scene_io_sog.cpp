@@ -376,33 +376,6 @@ TEST(SceneIoSog, MaxRecordsIsCheckedBeforeAnyTexture) {
 // ---------------------------------------------------------------------------------------
 // Against splat-transform.
 
-/// Random Gaussians in a box far from symmetric about every axis, so that a flipped axis
-/// moves the bounds by metres.
-catgs::Scene asymmetric_scene(int sh_degree, std::size_t n, unsigned seed) {
-    std::mt19937 rng(seed);
-    std::uniform_real_distribution<float> u(0.0f, 1.0f);
-    catgs::Scene s;
-    s.sh_degree = sh_degree;
-    s.resize(n);
-    for (std::size_t i = 0; i < n; ++i) {
-        s.positions[3 * i] = 1.0f + 2.0f * u(rng);
-        s.positions[3 * i + 1] = -2.0f + 0.5f * u(rng);
-        s.positions[3 * i + 2] = 4.0f + 3.0f * u(rng);
-        for (int a = 0; a < 3; ++a) s.scales[3 * i + a] = std::exp(-4.0f + 2.0f * u(rng));
-        float q[4], norm = 0;
-        for (float& c : q) {
-            c = u(rng) - 0.5f;
-            norm += c * c;
-        }
-        for (int c = 0; c < 4; ++c) s.rotations[4 * i + c] = q[c] / std::sqrt(norm);
-        s.opacities[i] = 0.1f + 0.85f * u(rng);
-        for (std::size_t k = 0; k < s.sh_floats_per_gaussian(); ++k)
-            s.sh[i * s.sh_floats_per_gaussian() + k] = (k < 3 ? 1.0f : 0.3f) * (u(rng) - 0.5f);
-    }
-    s.update_bounds();
-    return s;
-}
-
 TEST(SceneIoSogOracle, LoadsExactlyWhatSplatTransformDecodesAtEveryShDegree) {
     CATGS_NEED_ORACLE();
     catgs::oracle::TempDir dir("sog_oracle");
@@ -410,7 +383,7 @@ TEST(SceneIoSogOracle, LoadsExactlyWhatSplatTransformDecodesAtEveryShDegree) {
     std::vector<catgs::oracle::Conversion> to_sog, to_ply;
     for (int degree = 0; degree <= catgs::kMaxShDegree; ++degree) {
         const std::string d = std::to_string(degree);
-        originals.push_back(asymmetric_scene(degree, 300, 11 + static_cast<unsigned>(degree)));
+        originals.push_back(catgs::oracle::asymmetric_scene(degree, 300, 11 + static_cast<unsigned>(degree)));
         catgs::write_ply(originals.back(), dir.path("in" + d + ".ply"));
         // -g cpu: the SH palette's k-means runs on the CPU (no GPU in CI).
         to_sog.push_back({dir.path("in" + d + ".ply"), dir.path("out" + d + ".sog"), {"-g", "cpu"}});
@@ -444,7 +417,7 @@ TEST(SceneIoSogOracle, LoadsExactlyWhatSplatTransformDecodesAtEveryShDegree) {
 TEST(SceneIoSogOracle, UnbundledOutputLoads) {
     CATGS_NEED_ORACLE();
     catgs::oracle::TempDir dir("sog_unbundled");
-    const catgs::Scene original = asymmetric_scene(0, 200, 5);
+    const catgs::Scene original = catgs::oracle::asymmetric_scene(0, 200, 5);
     const std::string ply = dir.path("in.ply");
     catgs::write_ply(original, ply);
     ASSERT_TRUE(catgs::oracle::convert({ply, dir.path("meta.json"), {}}));
