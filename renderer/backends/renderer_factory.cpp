@@ -6,6 +6,7 @@
 #include "catgs/renderer.hpp"
 
 #if CATGS_HAVE_CUDA
+#include "cuda_check.hpp"
 #include "cuda_renderer.hpp"
 #endif
 
@@ -25,6 +26,11 @@ public:
         if (!scene_) throw Error("cpu renderer: no scene set");
         return renderer_.render(*scene_, camera, options, out, hints);
     }
+    FrameStats render_partial(const Camera& camera, const RenderOptions& options, PartialImage& out,
+                              const FrameHints* hints) override {
+        if (!scene_) throw Error("cpu renderer: no scene set");
+        return renderer_.render_partial(*scene_, camera, options, out, hints);
+    }
     void reset_cache() override { renderer_.reset_cache(); }
     std::string name() const override { return sizeof(T) == 4 ? "cpu/float" : "cpu/double"; }
 
@@ -34,41 +40,63 @@ private:
 };
 
 #if CATGS_HAVE_CUDA
-/// One device copy per host scene, shared by every renderer that renders it (a server's
-/// sessions): the entry lives as long as some renderer holds the device scene, and each such
-/// renderer also holds the host scene, so its address cannot be reused meanwhile.
-std::shared_ptr<const cuda::DeviceScene> shared_device_scene(const std::shared_ptr<const Scene>& scene,
+/// One copy per host scene and device, shared by every renderer of that device that renders
+/// it (a server's sessions there): the entry lives as long as some renderer holds the device
+/// scene, and each such renderer also holds the host scene, so its address cannot be reused
+/// meanwhile. The caller has made `device` current.
+std::shared_ptr<const cuda::DeviceScene> shared_device_scene(const std::shared_ptr<const Scene>& scene, int device,
                                                              cudaStream_t stream) {
     static std::mutex mutex;
-    static std::map<const Scene*, std::weak_ptr<const cuda::DeviceScene>> uploaded;
+    static std::map<std::pair<int, const Scene*>, std::weak_ptr<const cuda::DeviceScene>> uploaded;
     std::lock_guard lock(mutex);
     for (auto it = uploaded.begin(); it != uploaded.end();) it = it->second.expired() ? uploaded.erase(it) : ++it;
-    if (auto found = uploaded.find(scene.get()); found != uploaded.end())
-        if (auto device = found->second.lock()) return device;
-    auto device = std::make_shared<const cuda::DeviceScene>(*scene, stream);
-    uploaded[scene.get()] = device;
-    return device;
+    const std::pair<int, const Scene*> key{device, scene.get()};
+    if (auto found = uploaded.find(key); found != uploaded.end())
+        if (auto copy = found->second.lock()) return copy;
+    auto copy = std::make_shared<const cuda::DeviceScene>(*scene, stream);
+    uploaded[key] = copy;
+    return copy;
 }
+
+/// Makes `device` current on the calling thread before a renderer's CUDA calls: renderers of
+/// several devices share the server's worker threads, and CUDA acts on the current device.
+struct DeviceSelection {
+    explicit DeviceSelection(int index) : device(index) { select(); }
+    void select() const { CATGS_CUDA_CHECK(cudaSetDevice(device)); }
+    int device;
+};
 
 template <typename T>
 class CudaBackend final : public Renderer {
 public:
+    explicit CudaBackend(int device) : selection_(device) {}
+    ~CudaBackend() override {
+        // The members free their device memory and stream on the device they were made on.
+        cudaSetDevice(selection_.device);
+    }
     void set_scene(std::shared_ptr<const Scene> scene) override {
-        renderer_.set_scene(shared_device_scene(scene, renderer_.stream()));
+        selection_.select();
+        renderer_.set_scene(shared_device_scene(scene, selection_.device, renderer_.stream()));
         scene_ = std::move(scene);
     }
     FrameStats render(const Camera& camera, const RenderOptions& options, ImageF& out,
                       const FrameHints* hints) override {
+        selection_.select();
         return renderer_.render(camera, options, nullptr, &out, hints);
     }
     FrameStats render_rgb8(const Camera& camera, const RenderOptions& options, ImageRGB8& out,
                            const FrameHints* hints) override {
+        selection_.select();
         return renderer_.render(camera, options, &out, nullptr, hints);
     }
-    void reset_cache() override { renderer_.reset_cache(); }
+    void reset_cache() override {
+        selection_.select();
+        renderer_.reset_cache();
+    }
     std::string name() const override { return sizeof(T) == 4 ? "cuda/float" : "cuda/double"; }
 
 private:
+    DeviceSelection selection_;  // first: made current before renderer_ is constructed
     cuda::CudaRenderer<T> renderer_;
     std::shared_ptr<const Scene> scene_;  // keeps the shared device copy's key alive
 };
@@ -98,7 +126,22 @@ std::string available_backends() {
 #endif
 }
 
-std::unique_ptr<Renderer> make_renderer(const std::string& backend, Precision precision, int threads) {
+int device_count(const std::string& backend) {
+    if (backend == "cpu") return 1;
+#if CATGS_HAVE_CUDA
+    if (backend == "cuda") {
+        int count = 0;
+        if (cudaGetDeviceCount(&count) != cudaSuccess) {
+            cudaGetLastError();  // clear the error state for later calls
+            return 0;
+        }
+        return count;
+    }
+#endif
+    return 0;
+}
+
+std::unique_ptr<Renderer> make_renderer(const std::string& backend, Precision precision, int threads, int device) {
     if (backend == "cpu") {
         if (precision == Precision::double_) return std::make_unique<CpuBackend<double>>(threads);
         return std::make_unique<CpuBackend<float>>(threads);
@@ -107,9 +150,10 @@ std::unique_ptr<Renderer> make_renderer(const std::string& backend, Precision pr
 #if CATGS_HAVE_CUDA
         std::string reason;
         if (!cuda::device_available(&reason)) throw Error("backend 'cuda': no usable CUDA device (" + reason + ")");
-        if (precision == Precision::double_) return std::make_unique<CudaBackend<double>>();
-        return std::make_unique<CudaBackend<float>>();
+        if (precision == Precision::double_) return std::make_unique<CudaBackend<double>>(device);
+        return std::make_unique<CudaBackend<float>>(device);
 #else
+        (void)device;
         throw Error("backend 'cuda' is not built into this binary (available: " + available_backends() + ")");
 #endif
     }

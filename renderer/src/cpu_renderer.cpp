@@ -30,6 +30,33 @@ constexpr int kRadixBits = 8;
 constexpr std::uint32_t kNoSlot = std::numeric_limits<std::uint32_t>::max();
 constexpr std::size_t kTilePixels = static_cast<std::size_t>(kTileSize) * kTileSize;
 
+// Stores one finished pixel: C + T * background in the image, or (C, T) and whether the blend
+// stopped in the partial.
+template <typename T>
+void store_pixel(ImageF* image, PartialImage* partial, int x, int y, Vec3<T> colour, T transmittance, bool stopped,
+                 const Vec3<T>& background) {
+    const std::size_t pixel =
+        static_cast<std::size_t>(y) * static_cast<std::size_t>(image ? image->width : partial->width) +
+        static_cast<std::size_t>(x);
+    if (image) {
+        PixelAccumulator<T> acc;
+        acc.colour = colour;
+        acc.transmittance = transmittance;
+        const Vec3<T> c = finish_pixel(acc, background);
+        float* dst = &image->rgb[3 * pixel];
+        dst[0] = static_cast<float>(c.x);
+        dst[1] = static_cast<float>(c.y);
+        dst[2] = static_cast<float>(c.z);
+        return;
+    }
+    float* dst = &partial->colour[3 * pixel];
+    dst[0] = static_cast<float>(colour.x);
+    dst[1] = static_cast<float>(colour.y);
+    dst[2] = static_cast<float>(colour.z);
+    partial->transmittance[pixel] = static_cast<float>(transmittance);
+    partial->stopped[pixel] = stopped ? 1 : 0;
+}
+
 using Clock = std::chrono::steady_clock;
 double elapsed_ms(Clock::time_point since) {
     return std::chrono::duration<double, std::milli>(Clock::now() - since).count();
@@ -48,6 +75,18 @@ void CpuRenderer<T>::reset_cache() {
 template <typename T>
 FrameStats CpuRenderer<T>::render(const Scene& scene, const Camera& camera, const RenderOptions& options, ImageF& out,
                                   const FrameHints* hints) {
+    return render_frame(scene, camera, options, FrameOutput{&out, nullptr}, hints);
+}
+
+template <typename T>
+FrameStats CpuRenderer<T>::render_partial(const Scene& scene, const Camera& camera, const RenderOptions& options,
+                                          PartialImage& out, const FrameHints* hints) {
+    return render_frame(scene, camera, options, FrameOutput{nullptr, &out}, hints);
+}
+
+template <typename T>
+FrameStats CpuRenderer<T>::render_frame(const Scene& scene, const Camera& camera, const RenderOptions& options,
+                                        const FrameOutput& out, const FrameHints* hints) {
     validate(camera.intrinsics, "camera '" + camera.name + "'");
     scene.check_consistent("cpu renderer: scene");
     const View<T> view = make_view<T>(camera, scene.origin, options.near_plane);
@@ -390,8 +429,11 @@ std::uint32_t CpuRenderer<T>::split(const CatgsOptions& options) {
 // Every task blends its slice of its tile's list from T = 1. A tile that is not
 // split writes its pixels; a sub-task of a split tile writes (R, A) to its partial slot.
 template <typename T>
-void CpuRenderer<T>::rasterize(const View<T>& view, const RenderOptions& options, ImageF& out) {
-    out.resize(view.width, view.height);
+void CpuRenderer<T>::rasterize(const View<T>& view, const RenderOptions& options, const FrameOutput& out) {
+    if (out.image)
+        out.image->resize(view.width, view.height);
+    else
+        out.partial->resize(view.width, view.height);
     const Vec3<T> background{static_cast<T>(options.background[0]), static_cast<T>(options.background[1]),
                              static_cast<T>(options.background[2])};
     const T tail_threshold = static_cast<T>(options.catgs.split_tail_transmittance);
@@ -415,11 +457,7 @@ void CpuRenderer<T>::rasterize(const View<T>& view, const RenderOptions& options
                     for (const Projected<T>* g : list)
                         if (blend_gaussian(acc, g->mean, g->conic, g->opacity, g->colour, px, py, threshold)) break;
                     if (split_slot_[tt.tile] == kNoSlot) {
-                        const Vec3<T> c = finish_pixel(acc, background);
-                        float* dst = &out.rgb[3 * (static_cast<std::size_t>(y) * view.width + x)];
-                        dst[0] = static_cast<float>(c.x);
-                        dst[1] = static_cast<float>(c.y);
-                        dst[2] = static_cast<float>(c.z);
+                        store_pixel(out.image, out.partial, x, y, acc.colour, acc.transmittance, acc.done, background);
                     } else {
                         const std::size_t slot = split_slot_[tt.tile] + tt.index;
                         partials_[slot * kTilePixels + static_cast<std::size_t>((y - y0) * kTileSize + (x - x0))] =
@@ -432,7 +470,7 @@ void CpuRenderer<T>::rasterize(const View<T>& view, const RenderOptions& options
 
 // Composite each split tile's sub-tasks front to back.
 template <typename T>
-void CpuRenderer<T>::merge(const View<T>& view, const RenderOptions& options, ImageF& out) {
+void CpuRenderer<T>::merge(const View<T>& view, const RenderOptions& options, const FrameOutput& out) {
     const Vec3<T> background{static_cast<T>(options.background[0]), static_cast<T>(options.background[1]),
                              static_cast<T>(options.background[2])};
     const std::size_t tiles = ranges_.size();
@@ -449,14 +487,7 @@ void CpuRenderer<T>::merge(const View<T>& view, const RenderOptions& options, Im
                     const std::size_t pixel = static_cast<std::size_t>((y - y0) * kTileSize + (x - x0));
                     for (std::uint32_t i = 0; i < parts && !m.done; ++i)
                         merge_partial(m, partials_[(split_slot_[tile] + i) * kTilePixels + pixel]);
-                    PixelAccumulator<T> acc;
-                    acc.colour = m.colour;
-                    acc.transmittance = m.transmittance;
-                    const Vec3<T> c = finish_pixel(acc, background);
-                    float* dst = &out.rgb[3 * (static_cast<std::size_t>(y) * view.width + x)];
-                    dst[0] = static_cast<float>(c.x);
-                    dst[1] = static_cast<float>(c.y);
-                    dst[2] = static_cast<float>(c.z);
+                    store_pixel(out.image, out.partial, x, y, m.colour, m.transmittance, m.done, background);
                 }
         }
     });

@@ -17,6 +17,7 @@
 #include "catgs/cache.hpp"
 #include "catgs/camera.hpp"
 #include "catgs/image.hpp"
+#include "catgs/partial_image.hpp"
 #include "catgs/render_options.hpp"
 #include "catgs/scene.hpp"
 #include "catgs/stages/project.hpp"
@@ -46,6 +47,11 @@ public:
     FrameStats render(const Scene& scene, const Camera& camera, const RenderOptions& options, ImageF& out,
                       const FrameHints* hints = nullptr);
 
+    /// The same frame without its background: the (R, A) per pixel that render would finish
+    /// with C = R + A * background, and where the blend stopped (partial_image.hpp).
+    FrameStats render_partial(const Scene& scene, const Camera& camera, const RenderOptions& options, PartialImage& out,
+                              const FrameHints* hints = nullptr);
+
     /// Forgets the inter-frame cache and the pose history (a new stream or a new scene).
     void reset_cache();
 
@@ -69,6 +75,13 @@ private:
         T guard_translation = T(0);  // envelope radius in metres (speculation)
         T near_plane = T(0);         // lowered by the translation guard for speculation
     };
+    /// Where a frame's pixels go: the finished image, or the partial (exactly one is set).
+    struct FrameOutput {
+        ImageF* image = nullptr;
+        PartialImage* partial = nullptr;
+    };
+    FrameStats render_frame(const Scene& scene, const Camera& camera, const RenderOptions& options,
+                            const FrameOutput& out, const FrameHints* hints);
     void chunk_cull(const Scene& scene, const Window& window, bool cull_chunks);
     void preprocess(const Scene& scene, const View<T>& actual, const Window& window, Culling culling);
     void reproject(const Scene& scene, const View<T>& actual);
@@ -78,8 +91,8 @@ private:
     void ranges(const View<T>& view, Culling culling);
     std::uint32_t split(const CatgsOptions& options);
     void sort_and_schedule(const View<T>& view, const RenderOptions& options, FrameStats& stats);
-    void rasterize(const View<T>& view, const RenderOptions& options, ImageF& out);
-    void merge(const View<T>& view, const RenderOptions& options, ImageF& out);
+    void rasterize(const View<T>& view, const RenderOptions& options, const FrameOutput& out);
+    void merge(const View<T>& view, const RenderOptions& options, const FrameOutput& out);
     KeyFrameSummary summarize(const Scene& scene, const Window& window, Culling culling) const;
 
     /// Projects Gaussian i against every pose of the window into `poses`; returns the mask of
