@@ -66,4 +66,13 @@ CATGS_INLINE void merge_partial(MergeState<T>& m, const Partial<T>& p) {
     if (m.transmittance < static_cast<T>(kMinTransmittance)) m.done = true;
 }
 
+/// Adds the next shard's partial of a sharded frame, in the shards' front-to-back order
+/// (sharded_renderer.hpp). A shard whose own blend stopped ends the composite: the unsharded
+/// blend, whose transmittance there is at most the shard's, stopped at or before that point.
+template <typename T>
+CATGS_INLINE void merge_shard_partial(MergeState<T>& m, const Partial<T>& p, bool stopped) {
+    merge_partial(m, p);
+    m.done = m.done || stopped;
+}
+
 }  // namespace catgs
