@@ -15,6 +15,7 @@
 #include "catgs/renderer.hpp"
 #include "catgs/scene_io.hpp"
 #include "catgs/scene_ops.hpp"
+#include "catgs/sharded_renderer.hpp"
 #include "catgs/trajectory.hpp"
 #include "cli_options.hpp"
 #include "image_file.hpp"
@@ -36,6 +37,7 @@ struct Options {
     double fov = 70.0;
     double near_plane = catgs::kDefaultNearPlane;
     int threads = 0;
+    int shards = 1;
     long max_frames = -1;
     bool drop_invalid = false;
     bool info = false;
@@ -62,6 +64,66 @@ double percentile(std::vector<double> values, double p) {
     const std::size_t lo = static_cast<std::size_t>(rank);
     const std::size_t hi = std::min(lo + 1, values.size() - 1);
     return values[lo] + (rank - static_cast<double>(lo)) * (values[hi] - values[lo]);
+}
+
+/// One frame's entry of the --json output; `sharded` adds the shards' part.
+nlohmann::json frame_json(std::size_t i, const std::string& file, const catgs::FrameStats& s,
+                          const catgs::ShardedFrameStats* sharded) {
+    nlohmann::json frame{{"frame", i},
+                         {"file", file},
+                         {"total_ms", s.total_ms},
+                         {"visible", s.visible},
+                         {"pairs", s.pairs},
+                         {"key_frame", s.key_frame},
+                         {"window", s.window},
+                         {"split_tasks", s.split_tasks}};
+    for (catgs::Stage stage : catgs::kStages)
+        if (stage != catgs::Stage::encode) frame[std::string(catgs::stage_name(stage)) + "_ms"] = s.stage_ms[stage];
+    if (sharded) {
+        frame["shard_merge_ms"] = sharded->merge_ms;
+        frame["shard_order"] = sharded->order;
+        nlohmann::json per_shard = nlohmann::json::array();
+        for (const catgs::FrameStats& part : sharded->shards)
+            per_shard.push_back({{"total_ms", part.total_ms}, {"visible", part.visible}, {"pairs", part.pairs}});
+        frame["shards"] = std::move(per_shard);
+    }
+    return frame;
+}
+
+/// One frame's line of the text output; `sharded` adds the composite's time.
+void print_frame(std::size_t i, const catgs::FrameStats& s, const catgs::ShardedFrameStats* sharded) {
+    std::string stages;
+    for (catgs::Stage stage : catgs::kStages) {
+        if (stage == catgs::Stage::encode) continue;
+        char part[64];
+        std::snprintf(part, sizeof part, "%s%s %.2f", stages.empty() ? "" : ", ",
+                      std::string(catgs::stage_name(stage)).c_str(), s.stage_ms[stage]);
+        stages += part;
+    }
+    char shard_part[64] = "";
+    if (sharded) std::snprintf(shard_part, sizeof shard_part, "  shard merge %.2f ms", sharded->merge_ms);
+    std::printf("frame %5zu %s W=%-2d %8.2f ms  (%s)  visible %llu  pairs %llu  splits %llu%s\n", i,
+                s.key_frame ? "key   " : "cached", s.window, s.total_ms, stages.c_str(),
+                static_cast<unsigned long long>(s.visible), static_cast<unsigned long long>(s.pairs),
+                static_cast<unsigned long long>(s.split_tasks), shard_part);
+    std::fflush(stdout);
+}
+
+/// A sharded frame as one frame's stats: the shards' counts and stage times summed (they render
+/// one after another), a key frame if any shard's was, the whole frame's time.
+catgs::FrameStats sum_shards(const catgs::ShardedFrameStats& sharded) {
+    catgs::FrameStats s;
+    s.key_frame = false;
+    for (const catgs::FrameStats& part : sharded.shards) {
+        s.visible += part.visible;
+        s.pairs += part.pairs;
+        s.split_tasks += part.split_tasks;
+        s.key_frame = s.key_frame || part.key_frame;
+        s.window = std::max(s.window, part.window);
+        for (catgs::Stage stage : catgs::kStages) s.stage_ms[stage] += part.stage_ms[stage];
+    }
+    s.total_ms = sharded.total_ms;
+    return s;
 }
 
 int run(const Options& o) {
@@ -111,10 +173,23 @@ int run(const Options& o) {
         if (ec) throw catgs::Error("--out '" + o.out + "': cannot create directory: " + ec.message());
     }
 
-    auto renderer = catgs::make_renderer(o.backend, precision, o.threads);
-    renderer->set_scene(scene);
+    // --shards K: one renderer per shard, each holding its shard's Gaussians (sharded_renderer.hpp).
+    std::unique_ptr<catgs::Renderer> renderer;
+    std::unique_ptr<catgs::ShardedRenderer> sharded;
+    auto make = [&](int) { return catgs::make_renderer(o.backend, precision, o.threads); };
+    if (o.shards > 1) {
+        try {
+            sharded = std::make_unique<catgs::ShardedRenderer>(*scene, o.shards, make, o.threads);
+        } catch (const catgs::Error& e) {
+            throw catgs::Error("--shards " + std::to_string(o.shards) + ": " + e.what());
+        }
+    } else {
+        renderer = make(0);
+        renderer->set_scene(scene);
+    }
+    const std::string renderer_name = sharded ? sharded->name() : renderer->name();
     if (!o.json)
-        std::cout << "scene: " << catgs::describe(*scene) << "\nrenderer: " << renderer->name() << ", "
+        std::cout << "scene: " << catgs::describe(*scene) << "\nrenderer: " << renderer_name << ", "
                   << catgs::cli::describe_pipeline(render_options) << ", " << cameras.size() << " frames\n";
 
     nlohmann::json frames = nlohmann::json::array();
@@ -123,8 +198,16 @@ int run(const Options& o) {
     catgs::ImageRGB8 image8;
     for (std::size_t i = 0; i < cameras.size(); ++i) {
         // 8-bit frames come straight from render_rgb8: the GPU quantises on the device.
-        const catgs::FrameStats s = o.format == "exr" ? renderer->render(cameras[i], render_options, image)
-                                                      : renderer->render_rgb8(cameras[i], render_options, image8);
+        catgs::FrameStats s;
+        catgs::ShardedFrameStats shard_stats;
+        if (sharded) {
+            shard_stats = sharded->render(cameras[i], render_options, image);
+            s = sum_shards(shard_stats);
+            if (o.format != "exr") image8 = catgs::to_rgb8(image);
+        } else {
+            s = o.format == "exr" ? renderer->render(cameras[i], render_options, image)
+                                  : renderer->render_rgb8(cameras[i], render_options, image8);
+        }
         totals.push_back(s.total_ms);
         std::string file;
         if (!o.out.empty()) {
@@ -134,40 +217,17 @@ int run(const Options& o) {
             else
                 catgs::write_image(file, image8);
         }
-        if (o.json) {
-            nlohmann::json frame{{"frame", i},
-                                 {"file", file},
-                                 {"total_ms", s.total_ms},
-                                 {"visible", s.visible},
-                                 {"pairs", s.pairs},
-                                 {"key_frame", s.key_frame},
-                                 {"window", s.window},
-                                 {"split_tasks", s.split_tasks}};
-            for (catgs::Stage stage : catgs::kStages)
-                if (stage != catgs::Stage::encode)
-                    frame[std::string(catgs::stage_name(stage)) + "_ms"] = s.stage_ms[stage];
-            frames.push_back(std::move(frame));
-        } else {
-            std::string stages;
-            for (catgs::Stage stage : catgs::kStages) {
-                if (stage == catgs::Stage::encode) continue;
-                char part[64];
-                std::snprintf(part, sizeof part, "%s%s %.2f", stages.empty() ? "" : ", ",
-                              std::string(catgs::stage_name(stage)).c_str(), s.stage_ms[stage]);
-                stages += part;
-            }
-            std::printf("frame %5zu %s W=%-2d %8.2f ms  (%s)  visible %llu  pairs %llu  splits %llu\n", i,
-                        s.key_frame ? "key   " : "cached", s.window, s.total_ms, stages.c_str(),
-                        static_cast<unsigned long long>(s.visible), static_cast<unsigned long long>(s.pairs),
-                        static_cast<unsigned long long>(s.split_tasks));
-            std::fflush(stdout);
-        }
+        const catgs::ShardedFrameStats* shard_part = sharded ? &shard_stats : nullptr;
+        if (o.json)
+            frames.push_back(frame_json(i, file, s, shard_part));
+        else
+            print_frame(i, s, shard_part);
     }
     const double median = percentile(totals, 0.5), p90 = percentile(totals, 0.9),
                  worst = *std::max_element(totals.begin(), totals.end());
     if (o.json) {
         nlohmann::json summary{{"scene", nlohmann::json::parse(catgs::describe_json(*scene))},
-                               {"renderer", renderer->name()},
+                               {"renderer", renderer_name},
                                {"pipeline", catgs::cli::describe_pipeline(render_options)},
                                {"width", cameras[0].intrinsics.width},
                                {"height", cameras[0].intrinsics.height},
@@ -209,6 +269,11 @@ int main(int argc, char** argv) {
     app.add_option("--fov", o.fov, "horizontal field of view in degrees for trajectories")->capture_default_str();
     app.add_option("--near", o.near_plane, "near plane (view-space z)")->capture_default_str();
     app.add_option("--threads", o.threads, "CPU threads (0: all)")->capture_default_str();
+    app.add_option("--shards", o.shards,
+                   "render each frame as K spatial shards of the scene, one renderer each, composited front to back "
+                   "(docs/sharding.md; the cpu backend: cuda has no partial output yet)")
+        ->capture_default_str()
+        ->check(CLI::Range(1, catgs::kMaxShards));
     app.add_option("--max-frames", o.max_frames, "render at most this many cameras (-1: all)")->capture_default_str();
     app.add_option("--sh-degree", o.sh_degree,
                    "render with the SH coefficients above this degree (0..3) dropped; 0: view-independent colour "
