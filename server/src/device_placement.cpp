@@ -1,0 +1,205 @@
+#include "catgs/server/device_placement.hpp"
+
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
+#include <charconv>
+#include <cmath>
+
+#include "catgs/error.hpp"
+
+namespace catgs::server {
+namespace {
+
+/// A non-negative decimal integer, every character a digit; nullopt otherwise (signs, spaces,
+/// overflow, empty).
+std::optional<int> parse_index(const std::string& text) {
+    if (text.empty() || !std::all_of(text.begin(), text.end(), [](char c) { return c >= '0' && c <= '9'; }))
+        return std::nullopt;
+    int value = 0;
+    const auto [end, error] = std::from_chars(text.data(), text.data() + text.size(), value);
+    if (error != std::errc() || end != text.data() + text.size()) return std::nullopt;
+    return value;
+}
+
+std::string present_text(int present) {
+    if (present == 0) return "no CUDA device is present";
+    return std::to_string(present) + " CUDA device" + (present == 1 ? " is" : "s are") + " present (0.." +
+           std::to_string(present - 1) + ")";
+}
+
+[[noreturn]] void bad_gpus(const std::string& value, const std::string& problem) {
+    throw Error("--gpus: '" + value + "': " + problem);
+}
+
+}  // namespace
+
+std::vector<int> parse_gpus(const std::string& value, std::optional<int> present) {
+    const std::string expected = "expected all, a device count N or a comma-separated list of device indices (0,2)";
+    if (value.empty()) bad_gpus(value, "empty; " + expected);
+    const int limit = present ? *present : kMaxSimulatedDevices;
+    const std::string limit_text =
+        present ? present_text(*present) : "the CPU backend simulates at most " + std::to_string(limit) + " devices";
+    std::vector<int> devices;
+    if (value == "all") {
+        if (present && *present == 0) bad_gpus(value, present_text(0));
+        // The CPU backend has one real device, the host: more are simulated only when asked for.
+        const int count = present ? *present : 1;
+        for (int d = 0; d < count; ++d) devices.push_back(d);
+        return devices;
+    }
+    if (value.find(',') == std::string::npos) {
+        const std::optional<int> count = parse_index(value);
+        if (!count) bad_gpus(value, expected);
+        if (*count == 0) bad_gpus(value, "a device count must be at least 1");
+        if (*count > limit) bad_gpus(value, std::to_string(*count) + " devices asked for, but " + limit_text);
+        for (int d = 0; d < *count; ++d) devices.push_back(d);
+        return devices;
+    }
+    std::size_t begin = 0;
+    while (begin <= value.size()) {
+        const std::size_t end = std::min(value.find(',', begin), value.size());
+        const std::string item = value.substr(begin, end - begin);
+        const std::optional<int> index = parse_index(item);
+        if (!index) bad_gpus(value, "'" + item + "' is not a device index; " + expected);
+        if (*index >= limit) bad_gpus(value, "device " + item + " does not exist: " + limit_text);
+        if (std::find(devices.begin(), devices.end(), *index) != devices.end())
+            bad_gpus(value, "device " + item + " is named twice");
+        devices.push_back(*index);
+        begin = end + 1;
+    }
+    std::sort(devices.begin(), devices.end());
+    return devices;
+}
+
+struct DevicePlacement::Seat::State {
+    struct Residency {
+        int sessions = 0, pooled = 0;
+    };
+    struct Device {
+        int index = 0;
+        int sessions = 0;
+        double load = 0;  // render seconds per second, as of `updated`
+        Clock::time_point updated{};
+        std::map<std::string, Residency> scenes;  // only the resident ones
+    };
+    mutable std::mutex mutex;  // a leaf (lock order: server_core.hpp)
+    std::vector<Device> devices;
+    int max_sessions = 1;
+    double time_constant_s = 1;
+
+    // mutex held. The load decayed to `now` (a time sampled before another thread's record
+    // may lie before `updated`: no growth then).
+    double load_at(const Device& d, Clock::time_point now) const {
+        const double elapsed = std::max(0.0, std::chrono::duration<double>(now - d.updated).count());
+        return d.load * std::exp(-elapsed / time_constant_s);
+    }
+
+    // mutex held.
+    void hold(int slot, const std::string& scene_id, bool pooled) {
+        Device& d = devices[static_cast<std::size_t>(slot)];
+        auto [it, uploaded] = d.scenes.try_emplace(scene_id);
+        (pooled ? it->second.pooled : it->second.sessions)++;
+        if (uploaded) spdlog::info("scene {} resident on device {} (its first session there)", scene_id, d.index);
+    }
+
+    // mutex held.
+    void release(int slot, const std::string& scene_id, bool pooled) {
+        Device& d = devices[static_cast<std::size_t>(slot)];
+        auto it = d.scenes.find(scene_id);
+        if (it == d.scenes.end()) return;
+        int& count = pooled ? it->second.pooled : it->second.sessions;
+        if (count > 0) --count;
+        if (it->second.sessions == 0 && it->second.pooled == 0) {
+            d.scenes.erase(it);
+            spdlog::info("scene {} released from device {} (no session or pooled renderer there holds it)", scene_id,
+                         d.index);
+        }
+    }
+};
+
+DevicePlacement::DevicePlacement(std::vector<int> devices, int max_sessions_per_device,
+                                 std::chrono::duration<double> load_time_constant)
+    : devices_(std::move(devices)), state_(std::make_shared<Seat::State>()) {
+    if (devices_.empty()) throw Error("device placement: no devices");
+    state_->max_sessions = std::max(1, max_sessions_per_device);
+    state_->time_constant_s = std::max(1e-3, load_time_constant.count());
+    for (int index : devices_) state_->devices.push_back({index, 0, 0, {}, {}});
+}
+
+DevicePlacement::Seat::Seat(std::shared_ptr<State> state, int slot, int device, std::string scene_id)
+    : state_(std::move(state)), slot_(slot), device_(device), scene_id_(std::move(scene_id)) {}
+
+DevicePlacement::Seat::~Seat() {
+    std::lock_guard lock(state_->mutex);
+    --state_->devices[static_cast<std::size_t>(slot_)].sessions;
+    state_->release(slot_, scene_id_, /*pooled=*/false);
+}
+
+void DevicePlacement::Seat::record_render(double render_ms, Clock::time_point now) const {
+    if (!(render_ms > 0)) return;  // NaN or nothing measured: no information
+    std::lock_guard lock(state_->mutex);
+    State::Device& d = state_->devices[static_cast<std::size_t>(slot_)];
+    // Each frame adds its seconds spread over the time constant: at a steady rate the average
+    // converges to render seconds per second.
+    d.load = state_->load_at(d, now) + render_ms / 1000.0 / state_->time_constant_s;
+    d.updated = std::max(d.updated, now);
+}
+
+grpc::Status DevicePlacement::place(const std::string& scene_id, std::unique_ptr<Seat>* out, Clock::time_point now) {
+    std::lock_guard lock(state_->mutex);
+    int best = -1;
+    double best_load = 0;
+    for (int slot = 0; slot < static_cast<int>(state_->devices.size()); ++slot) {
+        const Seat::State::Device& d = state_->devices[static_cast<std::size_t>(slot)];
+        if (d.sessions >= state_->max_sessions) continue;
+        const double load = state_->load_at(d, now);
+        // Scanned in index order: a later device wins only with less load, or equal load and
+        // fewer sessions.
+        if (best < 0 || load < best_load ||
+            (load == best_load && d.sessions < state_->devices[static_cast<std::size_t>(best)].sessions)) {
+            best = slot;
+            best_load = load;
+        }
+    }
+    if (best < 0)
+        return {grpc::StatusCode::RESOURCE_EXHAUSTED,
+                "max-sessions: every device (" + std::to_string(state_->devices.size()) + ") already runs " +
+                    std::to_string(state_->max_sessions) + " sessions; retry later or on another server"};
+    Seat::State::Device& chosen = state_->devices[static_cast<std::size_t>(best)];
+    ++chosen.sessions;
+    state_->hold(best, scene_id, /*pooled=*/false);
+    out->reset(new Seat(state_, best, chosen.index, scene_id));
+    return grpc::Status::OK;
+}
+
+void DevicePlacement::hold_pooled(int slot, const std::string& scene_id) {
+    std::lock_guard lock(state_->mutex);
+    state_->hold(slot, scene_id, /*pooled=*/true);
+}
+
+void DevicePlacement::release_pooled(int slot, const std::string& scene_id) {
+    std::lock_guard lock(state_->mutex);
+    state_->release(slot, scene_id, /*pooled=*/true);
+}
+
+std::vector<DevicePlacement::SceneOnDevice> DevicePlacement::residency(const std::string& scene_id,
+                                                                       Clock::time_point now) const {
+    std::lock_guard lock(state_->mutex);
+    std::vector<SceneOnDevice> where;
+    for (const Seat::State::Device& d : state_->devices) {
+        auto it = d.scenes.find(scene_id);
+        if (it == d.scenes.end()) continue;
+        where.push_back({d.index, it->second.sessions, it->second.pooled, state_->load_at(d, now)});
+    }
+    return where;
+}
+
+std::vector<DevicePlacement::DeviceLoad> DevicePlacement::loads(Clock::time_point now) const {
+    std::lock_guard lock(state_->mutex);
+    std::vector<DeviceLoad> all;
+    for (const Seat::State::Device& d : state_->devices) all.push_back({d.index, d.sessions, state_->load_at(d, now)});
+    return all;
+}
+
+}  // namespace catgs::server
