@@ -15,6 +15,7 @@
 #include "catgs/common/files.hpp"
 #include "catgs/error.hpp"
 #include "catgs/renderer.hpp"
+#include "catgs/server/device_placement.hpp"
 #include "catgs/server/encoder.hpp"
 #include "catgs/server/server.hpp"
 
@@ -62,6 +63,13 @@ int main(int argc, char** argv) {
     app.add_option(
         "--backend", o.backend,
         "cpu or cuda (default: cuda when a device is usable, else cpu; built in: " + catgs::available_backends() + ")");
+    std::string gpus;
+    CLI::Option* gpus_option = app.add_option(
+        "--gpus", gpus,
+        "devices to place sessions on: all, N (devices 0..N-1) or a list of indices such as 0,2; each new session "
+        "goes to the device with the least measured render time per second, and --max-sessions counts per device. "
+        "CPU backend: N simulated devices (own renderers, scene residency and load, sharing the host's cores; all: "
+        "1). Default: device 0 alone (docs/multi-gpu.md)");
     app.add_option("--precision", o.precision, "float or double")->capture_default_str();
     app.add_option("--render-threads", o.render_threads, "CPU backend: threads per render (0: all cores)")
         ->capture_default_str();
@@ -132,6 +140,9 @@ int main(int argc, char** argv) {
         spdlog::set_level(spdlog::level::from_str(log_level));
         if (!scenes.empty()) o.preload = scenes;
         if (o.backend.empty()) o.backend = default_backend();
+        if (gpus_option->count() > 0)
+            o.devices = catgs::server::parse_gpus(
+                gpus, o.backend == "cuda" ? std::optional<int>(catgs::device_count("cuda")) : std::nullopt);
         o.limits.max_scene_bytes = max_scene_mb * kMiB;
         o.limits.max_session_bytes = max_session_mb * kMiB;
         if (!(o.limits.max_pose_rate >= 0)) throw catgs::Error("--max-pose-rate must be >= 0");

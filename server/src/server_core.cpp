@@ -3,6 +3,8 @@
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
+#include <cstdint>
+#include <limits>
 #include <thread>
 
 #include "catgs/server/stream_session.hpp"
@@ -26,51 +28,69 @@ bool constant_time_equal(const std::string& a, const std::string& b) {
 /// Cores the CUDA backend's render workers use between them: they mostly wait for the device.
 constexpr int kCudaFeedingCores = 1;
 
+/// --max-sessions on each of `devices`, in all; saturating, as --max-sessions may be as large as
+/// an int holds.
+int sessions_on_devices(int max_sessions, int devices) {
+    const std::int64_t all = static_cast<std::int64_t>(max_sessions) * std::max(devices, 1);
+    return static_cast<int>(std::min<std::int64_t>(all, std::numeric_limits<int>::max()));
+}
+
 /// Replaces 0 (auto) worker counts with auto_worker_counts, and logs what was chosen.
 ServerOptions with_worker_counts(ServerOptions o) {
     if (o.render_workers > 0 && o.encode_workers > 0) return o;
     const int cores = static_cast<int>(std::thread::hardware_concurrency());
-    const WorkerCounts counts = auto_worker_counts(o.backend, cores, o.limits.max_sessions);
+    const int devices = static_cast<int>(o.devices.size());
+    const WorkerCounts counts = auto_worker_counts(o.backend, cores, o.limits.max_sessions, devices);
     const bool render_auto = o.render_workers <= 0, encode_auto = o.encode_workers <= 0;
     if (render_auto) o.render_workers = counts.render;
     if (encode_auto) o.encode_workers = counts.encode;
-    spdlog::info("workers: {} render{}, {} encode{} ({} backend, {} cores)", o.render_workers,
-                 render_auto ? " (auto)" : "", o.encode_workers, encode_auto ? " (auto)" : "", o.backend, cores);
+    spdlog::info("workers: {} render{}, {} encode{} ({} backend, {} device{}, {} cores)", o.render_workers,
+                 render_auto ? " (auto)" : "", o.encode_workers, encode_auto ? " (auto)" : "", o.backend, devices,
+                 devices == 1 ? "" : "s", cores);
     return o;
 }
 
 }  // namespace
 
-WorkerCounts auto_worker_counts(const std::string& backend, int cores, int max_sessions) {
+WorkerCounts auto_worker_counts(const std::string& backend, int cores, int max_sessions, int devices) {
     cores = std::max(cores, 1);
+    devices = std::max(devices, 1);
     WorkerCounts counts;
     int left = 0;  // cores the renders leave to encoding
     if (backend == "cuda") {
-        counts.render = kRenderWorkersPerGpu;
-        left = cores - kCudaFeedingCores;
+        counts.render = kRenderWorkersPerGpu * devices;
+        left = cores - kCudaFeedingCores * devices;
     } else {
         counts.render = std::min(2, cores);
     }
-    counts.encode = std::max(kMinEncodeWorkers, std::min(left, max_sessions));
+    counts.encode = std::max(kMinEncodeWorkers, std::min(left, sessions_on_devices(max_sessions, devices)));
     return counts;
 }
 
 std::string auto_worker_counts_help() {
     return "0: auto, from the machine: render " + std::to_string(kRenderWorkersPerGpu) +
-           " on CUDA (sessions' frames overlap on the GPU), 2 on the CPU backend (1 on one core); encode the cores "
-           "left (CUDA: all but " +
-           std::to_string(kCudaFeedingCores) + ", CPU: none), at least " + std::to_string(kMinEncodeWorkers) +
-           ", at most --max-sessions";
+           " per GPU on CUDA (sessions' frames overlap on the GPU), 2 on the CPU backend (1 on one core); encode the "
+           "cores left (CUDA: all but " +
+           std::to_string(kCudaFeedingCores) + " per GPU, CPU: none), at least " + std::to_string(kMinEncodeWorkers) +
+           ", at most --max-sessions times the devices";
 }
 
 ServerCore::ServerCore(ServerOptions options)
     : options_(with_worker_counts(std::move(options))),
       scenes_(options_.scene_root, options_.limits.max_scene_bytes),
-      admission_(options_.limits.max_sessions),
+      // --max-sessions is per device: the server admits that many on each, and placement_
+      // refuses a device that is full.
+      admission_(sessions_on_devices(options_.limits.max_sessions, static_cast<int>(options_.devices.size()))),
+      placement_(options_.devices, options_.limits.max_sessions),
       render_pool_("render", options_.render_workers),
       encode_pool_("encode", options_.encode_workers),
       admin_pool_("scene-load", 1) {
     scenes_.set_on_freed([this](const Scene* scene) { drop_pooled(scene); });
+    std::string devices;
+    for (int d : options_.devices) devices += (devices.empty() ? "" : ", ") + std::to_string(d);
+    spdlog::info("devices: {} ({} backend{}), at most {} sessions each", devices, options_.backend,
+                 options_.backend == "cuda" || options_.devices.size() == 1 ? "" : ", simulated",
+                 options_.limits.max_sessions);
     if (options_.limits.stall_timeout_ms > 0 || options_.limits.open_timeout_ms > 0)
         watchdog_ = std::thread([this] { watchdog(); });
 }
@@ -94,21 +114,26 @@ grpc::Status ServerCore::authorize(const grpc::CallbackServerContext* context) c
     return {grpc::StatusCode::UNAUTHENTICATED, "authorization: missing metadata 'authorization: Bearer <token>'"};
 }
 
-std::unique_ptr<Renderer> ServerCore::make_session_renderer() const {
+std::unique_ptr<Renderer> ServerCore::make_session_renderer(int device) const {
     if (options_.renderer_factory) return options_.renderer_factory();
-    return make_renderer(options_.backend, parse_precision(options_.precision), options_.render_threads);
+    return make_renderer(options_.backend, parse_precision(options_.precision), options_.render_threads, device);
 }
 
-std::unique_ptr<Renderer> ServerCore::acquire_unary_renderer(const std::shared_ptr<const Scene>& scene) {
+std::unique_ptr<Renderer> ServerCore::acquire_unary_renderer(const std::shared_ptr<const Scene>& scene,
+                                                             const DevicePlacement::Seat& seat) {
     std::unique_ptr<Renderer> renderer;
     {
         std::lock_guard lock(pool_mutex_);
-        // One already showing this scene (no upload), else any idle one.
-        auto it = std::find_if(pool_.begin(), pool_.end(), [&](const PooledRenderer& p) { return p.scene == scene; });
-        if (it == pool_.end() && !pool_.empty()) it = pool_.begin();
+        // Of the seat's device: one already showing this scene (no upload), else any idle one.
+        const auto here = [&](const PooledRenderer& p) { return p.slot == seat.slot(); };
+        auto it = std::find_if(pool_.begin(), pool_.end(),
+                               [&](const PooledRenderer& p) { return here(p) && p.scene == scene; });
+        if (it == pool_.end()) it = std::find_if(pool_.begin(), pool_.end(), here);
         if (it != pool_.end()) {
             renderer = std::move(it->renderer);
             const bool same = it->scene == scene;
+            // The seat holds the scene on this device meanwhile: its residency does not lapse.
+            placement_.release_pooled(it->slot, it->scene_id);
             pool_.erase(it);
             if (same) {
                 renderer->reset_cache();
@@ -116,13 +141,14 @@ std::unique_ptr<Renderer> ServerCore::acquire_unary_renderer(const std::shared_p
             }
         }
     }
-    if (!renderer) renderer = make_session_renderer();
+    if (!renderer) renderer = make_session_renderer(seat.device());
     renderer->set_scene(scene);
     return renderer;
 }
 
 void ServerCore::release_unary_renderer(std::unique_ptr<Renderer> renderer, const std::shared_ptr<const Scene>& scene,
-                                        const std::string& scene_id) {
+                                        const DevicePlacement::Seat& seat) {
+    const std::string& scene_id = seat.scene_id();
     if (!renderer) return;
     std::unique_ptr<Renderer> surplus;  // destroyed outside the lock
     std::lock_guard lock(pool_mutex_);
@@ -134,7 +160,8 @@ void ServerCore::release_unary_renderer(std::unique_ptr<Renderer> renderer, cons
         surplus = std::move(renderer);
         return;
     }
-    pool_.push_back({scene, std::move(renderer)});
+    placement_.hold_pooled(seat.slot(), scene_id);
+    pool_.push_back({scene, scene_id, seat.slot(), std::move(renderer)});
 }
 
 void ServerCore::drop_pooled(const Scene* scene) {
@@ -142,6 +169,7 @@ void ServerCore::drop_pooled(const Scene* scene) {
     std::lock_guard lock(pool_mutex_);
     for (auto it = pool_.begin(); it != pool_.end();) {
         if (it->scene.get() == scene) {
+            placement_.release_pooled(it->slot, it->scene_id);
             dropped.push_back(std::move(*it));
             it = pool_.erase(it);
         } else {
@@ -235,6 +263,7 @@ void ServerCore::stop_workers() {
     {
         std::lock_guard lock(pool_mutex_);
         pool.swap(pool_);
+        for (const PooledRenderer& p : pool) placement_.release_pooled(p.slot, p.scene_id);
     }
 }
 

@@ -48,6 +48,7 @@ grpc::ServerUnaryReactor* RenderServiceImpl::Render(grpc::CallbackServerContext*
         FrameSetup frame;
         std::unique_ptr<Admission::Ticket> ticket;
         std::unique_ptr<SceneRegistry::Lease> lease;
+        std::unique_ptr<DevicePlacement::Seat> seat;  // released before the lease and the ticket
         ImageRGB8 image;
         v1::Frame frame_out;
         Clock::time_point received = Clock::now();
@@ -57,6 +58,7 @@ grpc::ServerUnaryReactor* RenderServiceImpl::Render(grpc::CallbackServerContext*
     if (status.ok()) status = parse_frame_request(request.frame(), job->setup.intrinsics, "frame", &job->frame);
     if (status.ok()) status = core_.admission().admit(&job->ticket);
     if (status.ok()) status = acquire_scene(core_.scenes(), job->setup.scene_id, "config", &job->lease);
+    if (status.ok()) status = core_.placement().place(job->setup.scene_id, &job->seat);
     if (!status.ok()) return finish_now(context, status);
     // One frame: no inter-frame cache to reuse.
     job->setup.options.catgs.cache = CacheMode::off;
@@ -70,11 +72,12 @@ grpc::ServerUnaryReactor* RenderServiceImpl::Render(grpc::CallbackServerContext*
         const std::uint64_t max_bytes = core.options().limits.max_session_bytes;
         const std::optional<RenderFailure> failure = catch_render_failure([&] {
             // Renderers are pooled across unary calls (making one is slow on CUDA).
-            auto renderer = core.acquire_unary_renderer(job->lease->scene());
+            auto renderer = core.acquire_unary_renderer(job->lease->scene(), *job->seat);
             stats = renderer->render_rgb8(job->frame.camera, job->setup.options, job->image);
+            job->seat->record_render(stats.total_ms);
             // Over the memory limit: the renderer's grow-only arenas are not kept.
             if (max_bytes == 0 || stats.arena_bytes <= max_bytes)
-                core.release_unary_renderer(std::move(renderer), job->lease->scene(), job->setup.scene_id);
+                core.release_unary_renderer(std::move(renderer), job->lease->scene(), *job->seat);
         });
         if (failure) {
             if (failure->out_of_memory) core.counters().out_of_memory++;
@@ -121,8 +124,17 @@ void SceneServiceImpl::fill(const SceneSummary& s, v1::SceneInfo* info) const {
     max->set_y(s.bounds.max[1]);
     max->set_z(s.bounds.max[2]);
     info->set_host_bytes(s.host_bytes);
-    // Sessions share one device copy of a scene (renderer_factory.cpp, shared_device_scene).
-    info->set_device_bytes(core_.options().backend == "cuda" && s.sessions > 0 ? s.host_bytes : 0);
+    const std::vector<DevicePlacement::SceneOnDevice> where = core_.placement().residency(s.id);
+    for (const DevicePlacement::SceneOnDevice& d : where) {
+        v1::SceneDevice* out = info->add_devices();
+        out->set_device(d.device);
+        out->set_sessions(static_cast<std::uint32_t>(d.sessions));
+        out->set_pooled_renderers(static_cast<std::uint32_t>(d.pooled_renderers));
+        out->set_render_load(d.load);
+    }
+    // The sessions of one device share one copy of a scene there (renderer_factory.cpp,
+    // shared_device_scene); the CPU backend's simulated devices share the host's.
+    info->set_device_bytes(core_.options().backend == "cuda" ? s.host_bytes * where.size() : 0);
     info->set_sessions(s.sessions);
     info->set_state(s.unloading ? v1::SCENE_STATE_UNLOADING : v1::SCENE_STATE_READY);
 }

@@ -262,6 +262,7 @@ void StreamSession::handle_open(const v1::SessionConfig& config) {
     grpc::Status status = parse_session_config(config, core_.options().limits, "open", &setup_);
     if (status.ok()) status = core_.admission().admit(&ticket_);
     if (status.ok()) status = acquire_scene(core_.scenes(), setup_.scene_id, "open", &lease_);
+    if (status.ok()) status = core_.placement().place(setup_.scene_id, &seat_);
     if (!status.ok()) {
         request_finish_locked(status);
         return;

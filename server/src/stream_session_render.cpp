@@ -18,7 +18,7 @@ bool same_pose(const Pose& a, const Pose& b) {
 void StreamSession::initialise() {
     std::unique_ptr<Renderer> renderer;
     const std::optional<RenderFailure> failure = catch_render_failure([&] {
-        renderer = core_.make_session_renderer();
+        renderer = core_.make_session_renderer(seat_->device());
         renderer->set_scene(lease_->scene());  // CUDA: uploads the scene unless another session did
     });
     Actions actions;
@@ -40,8 +40,8 @@ void StreamSession::initialise() {
                 phase_ = Phase::open;
                 const Intrinsics& k = setup_.intrinsics;
                 spdlog::info(
-                    "session {} opened by {}: scene {}, {}x{} fx {:.1f}, {}{}, {}, max {} unacked", id_, peer_,
-                    setup_.scene_id, k.width, k.height, k.fx, format_name(setup_.encode.format),
+                    "session {} opened by {}: scene {} on device {}, {}x{} fx {:.1f}, {}{}, {}, max {} unacked", id_,
+                    peer_, setup_.scene_id, seat_->device(), k.width, k.height, k.fx, format_name(setup_.encode.format),
                     setup_.encode.format == Format::jpeg ? " q" + std::to_string(setup_.encode.jpeg_quality) : "",
                     renderer_->name(), setup_.max_unacked_frames);
             }
@@ -87,6 +87,7 @@ void StreamSession::render(PendingPose pose) {
                                              pose.frame.hints ? &*pose.frame.hints : nullptr);
     });
     const Clock::time_point rendered = Clock::now();
+    if (!failure) seat_->record_render(frame_stats.total_ms, rendered);
     const std::uint64_t max_bytes = core_.options().limits.max_session_bytes;
     const bool over_limit = !failure && max_bytes > 0 && frame_stats.arena_bytes > max_bytes;
     Actions actions;

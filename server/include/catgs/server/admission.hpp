@@ -13,7 +13,7 @@
 namespace catgs::server {
 
 struct Limits {
-    /// Concurrent sessions (streams and unary renders) per server, i.e. per GPU: each session
+    /// Concurrent sessions (streams and unary renders) per GPU (--gpus: per device): each session
     /// owns a renderer with its own arenas, and frame rate drops for everyone beyond a few.
     int max_sessions = 8;
     /// Largest image a session may ask for; 4K covers every viewer and bounds arena memory.

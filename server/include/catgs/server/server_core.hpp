@@ -17,6 +17,7 @@
 
 #include "catgs/renderer.hpp"
 #include "catgs/server/admission.hpp"
+#include "catgs/server/device_placement.hpp"
 #include "catgs/server/scene_registry.hpp"
 #include "catgs/server/worker_pool.hpp"
 
@@ -32,6 +33,9 @@ struct ServerOptions {
     /// operator's, not a client's).
     std::vector<std::string> preload{"city=builtin:city?gaussians=200000&seed=1"};
     std::string backend = "cpu";
+    /// The devices sessions are placed on (--gpus, parse_gpus; docs/multi-gpu.md): CUDA device
+    /// indices, or the CPU backend's simulated devices. Default: device 0 alone, one GPU.
+    std::vector<int> devices{0};
     std::string precision = "float";
     int render_threads = 0;  ///< CPU backend threads per render (0: all cores)
     int render_workers = 0;  ///< sessions rendering at once (0: auto_worker_counts)
@@ -78,14 +82,15 @@ struct ServerStats {
 };
 
 /// The worker counts that 0 (auto) stands for, sized from the machine: `cores` (0: unknown,
-/// taken as 1) and the backend. One server drives one GPU (one server per GPU, deploy/).
-/// - render: CUDA kRenderWorkersPerGpu, so that several sessions' frames overlap on the GPU
+/// taken as 1), the backend and the `devices` sessions are placed on (--gpus).
+/// - render: CUDA kRenderWorkersPerGpu per device, so that several sessions' frames overlap on the GPU
 ///   (its stages of one frame leave it idle between kernels and during copies); CPU two (one
 ///   on one core): each render already spreads over --render-threads cores, and the second
 ///   lets a small viewer's render start beside a large one instead of behind it.
 /// - encode: the cores the renders leave, at least kMinEncodeWorkers and at most
-///   `max_sessions` (a session encodes one frame at a time, so more would idle). The CPU
-///   backend's renders take every core: it gets kMinEncodeWorkers.
+///   `max_sessions` per device (a session encodes one frame at a time, so more would idle). The
+///   CPU backend's renders take every core (its simulated devices share them): it gets
+///   kMinEncodeWorkers.
 struct WorkerCounts {
     int render = 0, encode = 0;
 };
@@ -93,7 +98,7 @@ inline constexpr int kRenderWorkersPerGpu = 4;
 /// Two: a session encodes one frame at a time, so a large encode (PNG) of one session never
 /// makes another session's frame wait for a worker.
 inline constexpr int kMinEncodeWorkers = 2;
-WorkerCounts auto_worker_counts(const std::string& backend, int cores, int max_sessions);
+WorkerCounts auto_worker_counts(const std::string& backend, int cores, int max_sessions, int devices = 1);
 /// What --help says 0 means, in the terms above.
 std::string auto_worker_counts_help();
 
@@ -107,23 +112,29 @@ public:
     const ServerOptions& options() const { return options_; }
     SceneRegistry& scenes() { return scenes_; }
     Admission& admission() { return admission_; }
+    DevicePlacement& placement() { return placement_; }
     WorkerPool& render_pool() { return render_pool_; }
     WorkerPool& encode_pool() { return encode_pool_; }
     WorkerPool& admin_pool() { return admin_pool_; }
 
     /// OK, or UNAUTHENTICATED when a bearer token is configured and the call lacks it.
     grpc::Status authorize(const grpc::CallbackServerContext* context) const;
-    /// A renderer for one session, on the configured backend. Slow on CUDA (allocations):
-    /// call from a worker.
-    std::unique_ptr<Renderer> make_session_renderer() const;
+    /// A renderer for one session on `device` (a DevicePlacement::Seat's), on the configured
+    /// backend; without one, on the first configured device. Slow on CUDA (allocations): call
+    /// from a worker.
+    std::unique_ptr<Renderer> make_session_renderer(int device) const;
+    std::unique_ptr<Renderer> make_session_renderer() const { return make_session_renderer(options_.devices.front()); }
 
     /// Unary renders reuse renderers (on CUDA each holds arenas and a stream, slow to make):
-    /// a renderer showing `scene`, taken from the pool when one is idle. Call from a worker.
-    std::unique_ptr<Renderer> acquire_unary_renderer(const std::shared_ptr<const Scene>& scene);
-    /// Returns a renderer to the pool (at most render_workers are kept). Call while the
-    /// caller still holds its scene lease: renderers of scenes being unloaded are dropped.
+    /// a renderer of the seat's device showing `scene`, taken from the pool when one of that
+    /// device is idle. Call from a worker.
+    std::unique_ptr<Renderer> acquire_unary_renderer(const std::shared_ptr<const Scene>& scene,
+                                                     const DevicePlacement::Seat& seat);
+    /// Returns a renderer to the pool (at most render_workers are kept), where it keeps the
+    /// scene resident on its device. Call while the caller still holds its scene lease and
+    /// seat: renderers of scenes being unloaded are dropped.
     void release_unary_renderer(std::unique_ptr<Renderer> renderer, const std::shared_ptr<const Scene>& scene,
-                                const std::string& scene_id);
+                                const DevicePlacement::Seat& seat);
 
     void add_stream(const std::shared_ptr<StreamSession>& session);
     void remove_stream(StreamSession* session);
@@ -147,14 +158,17 @@ private:
 
     // The server's locks, and which may be held while taking which (no other nesting exists;
     // callbacks and destructors that take a lock run after the caller's lock is released):
-    //   StreamSession::mutex_ -> Admission's, SceneRegistry's and WorkerPool's mutexes
-    //                            (admit, acquire_scene and post while handling a request);
-    //   pool_mutex_           -> SceneRegistry's mutex (release_unary_renderer checks the scene);
+    //   StreamSession::mutex_ -> Admission's, SceneRegistry's, DevicePlacement's and WorkerPool's
+    //                            mutexes (admit, acquire_scene, place and post while handling a
+    //                            request);
+    //   pool_mutex_           -> SceneRegistry's mutex (release_unary_renderer checks the scene),
+    //                            DevicePlacement's (the pool's holds on scenes);
     // and taken alone: streams_mutex_, watchdog_mutex_, Server::mutex_. The SceneRegistry calls
     // its on_freed listener (drop_pooled, which takes pool_mutex_) outside its own lock.
     ServerOptions options_;
     SceneRegistry scenes_;
-    Admission admission_;
+    Admission admission_;  // every device's sessions: placement_ counts them per device
+    DevicePlacement placement_;
     Counters counters_;
     WorkerPool render_pool_;
     WorkerPool encode_pool_;
@@ -164,6 +178,8 @@ private:
 
     struct PooledRenderer {
         std::shared_ptr<const Scene> scene;
+        std::string scene_id;
+        int slot = 0;  // its device's position in placement_
         std::unique_ptr<Renderer> renderer;
     };
     mutable std::mutex pool_mutex_;

@@ -185,6 +185,9 @@ private:
     SessionSetup setup_;
     std::unique_ptr<Admission::Ticket> ticket_;
     std::unique_ptr<SceneRegistry::Lease> lease_;
+    // Set at open, before the renderer is made, and kept (read by workers without mutex_
+    // after that); released before the lease and the ticket.
+    std::unique_ptr<DevicePlacement::Seat> seat_;
     std::unique_ptr<Renderer> renderer_;  // used by one render task at a time
 
     std::optional<PendingPose> pending_;  // the newest pose not yet taken by a render task
