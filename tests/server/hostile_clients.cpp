@@ -35,18 +35,6 @@ std::vector<Camera> path_for(const v1::SessionConfig& config) {
     return uav_path(kPathPoses, static_cast<int>(config.width()), static_cast<int>(config.height()));
 }
 
-void set_deadline(grpc::ClientContext& context) {
-    context.set_deadline(std::chrono::system_clock::now() + kCallDeadline);
-}
-
-/// Reads whatever is left and returns the status (after a cancel: CANCELLED at once).
-grpc::Status drain(grpc::ClientReaderWriter<v1::StreamRequest, v1::Frame>& stream) {
-    v1::Frame ignored;
-    while (stream.Read(&ignored)) {
-    }
-    return stream.Finish();
-}
-
 }  // namespace
 
 double StreamMeasurement::latency_quantile(double q) const {
@@ -60,10 +48,8 @@ double StreamMeasurement::latency_quantile(double q) const {
 // ---------------------------------------------------------------------------------------
 
 PacedViewer::PacedViewer(int port, v1::SessionConfig config, double poses_per_second)
-    : poses_per_second_(poses_per_second), channel_(channel_to(port)), stub_(v1::RenderService::NewStub(channel_)) {
-    set_deadline(context_);
-    stream_ = stub_->Stream(&context_);
-    stream_->Write(open_message(config));
+    : poses_per_second_(poses_per_second), call_(channel_to(port), "", kCallDeadline) {
+    call_.open(config);
     reader_ = std::thread([this] { read_loop(); });
     sender_ = std::thread([this, path = path_for(config)] {
         std::uint64_t sequence = 0;
@@ -74,12 +60,11 @@ PacedViewer::PacedViewer(int port, v1::SessionConfig config, double poses_per_se
                 std::lock_guard lock(mutex_);
                 sent_at_.push_back(Clock::now());
             }
-            if (!stream_->Write(frame_message(frame_request(sequence, path[sequence % path.size()], last_received_))))
-                break;
+            if (!call_.send(frame_request(sequence, path[sequence % path.size()], last_received_))) break;
             next += period_of(poses_per_second_);
             std::this_thread::sleep_until(next);
         }
-        stream_->WritesDone();
+        call_.stream->WritesDone();
     });
 }
 
@@ -88,7 +73,7 @@ PacedViewer::~PacedViewer() {
 }
 
 void PacedViewer::read_loop() {
-    for (v1::Frame frame; stream_->Read(&frame);) {
+    for (v1::Frame frame; call_.stream->Read(&frame);) {
         const auto now = Clock::now();
         if (frame.has_error()) {
             ++error_frames_;
@@ -133,23 +118,20 @@ grpc::Status PacedViewer::stop() {
     stop_ = true;
     sender_.join();  // it half-closes: the server answers the last pose and ends the stream
     reader_.join();
-    status_ = stream_->Finish();
+    status_ = call_.stream->Finish();
     return status_;
 }
 
 // ---------------------------------------------------------------------------------------
 
 AckButNeverRead::AckButNeverRead(int port, v1::SessionConfig config, double poses_per_second)
-    : channel_(channel_to(port)), stub_(v1::RenderService::NewStub(channel_)) {
-    set_deadline(context_);
-    stream_ = stub_->Stream(&context_);
-    stream_->Write(open_message(config));
+    : call_(channel_to(port), "", kCallDeadline) {
+    call_.open(config);
     sender_ = std::thread([this, path = path_for(config), period = period_of(poses_per_second)] {
         auto next = Clock::now();
         for (std::uint64_t sequence = 1; !stop_; ++sequence) {
             // The lie: every frame sent so far acknowledged, none read.
-            if (!stream_->Write(frame_message(frame_request(sequence, path[sequence % path.size()], sequence - 1))))
-                break;
+            if (!call_.send(frame_request(sequence, path[sequence % path.size()], sequence - 1))) break;
             ++sent_;
             next += period;
             std::this_thread::sleep_until(next);
@@ -163,20 +145,18 @@ AckButNeverRead::~AckButNeverRead() {
 
 void AckButNeverRead::stop() {
     if (stop_.exchange(true)) return;
-    context_.TryCancel();  // also unblocks a write stuck in flow control
+    call_.context.TryCancel();  // also unblocks a write stuck in flow control
     sender_.join();
-    drain(*stream_);
+    call_.finish();
 }
 
 // ---------------------------------------------------------------------------------------
 
 GreedyViewer::GreedyViewer(int port, v1::SessionConfig config, double poses_per_second)
-    : channel_(channel_to(port)), stub_(v1::RenderService::NewStub(channel_)) {
-    set_deadline(context_);
-    stream_ = stub_->Stream(&context_);
-    stream_->Write(open_message(config));
+    : call_(channel_to(port), "", kCallDeadline) {
+    call_.open(config);
     reader_ = std::thread([this] {
-        for (v1::Frame frame; stream_->Read(&frame);) {
+        for (v1::Frame frame; call_.stream->Read(&frame);) {
             if (frame.has_error()) continue;
             last_received_ = frame.sequence();
             ++frames_;
@@ -185,8 +165,7 @@ GreedyViewer::GreedyViewer(int port, v1::SessionConfig config, double poses_per_
     sender_ = std::thread([this, path = path_for(config), period = period_of(poses_per_second)] {
         auto next = Clock::now();
         for (std::uint64_t sequence = 1; !stop_; ++sequence) {
-            if (!stream_->Write(frame_message(frame_request(sequence, path[sequence % path.size()], last_received_))))
-                break;
+            if (!call_.send(frame_request(sequence, path[sequence % path.size()], last_received_))) break;
             next += period;
             std::this_thread::sleep_until(next);
         }
@@ -199,10 +178,10 @@ GreedyViewer::~GreedyViewer() {
 
 void GreedyViewer::stop() {
     if (stop_.exchange(true)) return;
-    context_.TryCancel();
+    call_.context.TryCancel();
     sender_.join();
     reader_.join();
-    stream_->Finish();
+    call_.stream->Finish();
 }
 
 // ---------------------------------------------------------------------------------------
@@ -252,30 +231,23 @@ void Churner::run() {
 }
 
 void Churner::refused_open(int variant) {
-    auto stub = v1::RenderService::NewStub(channel_);
-    grpc::ClientContext context;
-    set_deadline(context);
-    auto stream = stub->Stream(&context);
+    StreamClient call(channel_, "", kCallDeadline);
     v1::SessionConfig config = session_config(v1::ENCODING_JPEG, 80);
     if (variant % 2)
         config.set_scene_id("no-such-scene");
     else
         config.set_width(0);
-    stream->Write(open_message(config));
-    stream->WritesDone();
-    drain(*stream);
+    call.open(config);
+    call.close();
 }
 
 void Churner::cancel_after_first_pose() {
-    auto stub = v1::RenderService::NewStub(channel_);
-    grpc::ClientContext context;
-    set_deadline(context);
-    auto stream = stub->Stream(&context);
+    StreamClient call(channel_, "", kCallDeadline);
     v1::SessionConfig config = session_config(v1::ENCODING_PNG);
-    stream->Write(open_message(config));
-    stream->Write(frame_message(frame_request(1, uav_path(2, kChurnWidth, kChurnHeight)[1], 0)));
-    context.TryCancel();
-    drain(*stream);
+    call.open(config);
+    call.send(frame_request(1, uav_path(2, kChurnWidth, kChurnHeight)[1], 0));
+    call.context.TryCancel();
+    call.finish();
 }
 
 void Churner::tcp_junk() {
@@ -297,31 +269,25 @@ void Churner::tcp_junk() {
 }
 
 void Churner::pose_flood() {
-    auto stub = v1::RenderService::NewStub(channel_);
-    grpc::ClientContext context;
-    set_deadline(context);
-    auto stream = stub->Stream(&context);
+    StreamClient call(channel_, "", kCallDeadline);
     v1::SessionConfig config = session_config(v1::ENCODING_JPEG, 80);
-    stream->Write(open_message(config));
+    call.open(config);
     const auto path = uav_path(kPathPoses, kChurnWidth, kChurnHeight);
     std::uint64_t sequence = 0;
     for (int i = 0; i < kFloodRequests; ++i) {
         // Every tenth repeats the previous sequence number: an error frame each.
         if (i % 10 != 9) ++sequence;
-        if (!stream->Write(frame_message(frame_request(sequence, path[sequence % path.size()], 0)))) break;
+        if (!call.send(frame_request(sequence, path[sequence % path.size()], 0))) break;
     }
-    context.TryCancel();
-    drain(*stream);
+    call.context.TryCancel();
+    call.finish();
 }
 
 void Churner::never_opens() {
-    auto stub = v1::RenderService::NewStub(channel_);
-    grpc::ClientContext context;
-    set_deadline(context);
-    auto stream = stub->Stream(&context);
+    StreamClient call(channel_, "", kCallDeadline);
     std::this_thread::sleep_for(pause_);
-    context.TryCancel();
-    drain(*stream);
+    call.context.TryCancel();
+    call.finish();
 }
 
 }  // namespace catgs::test

@@ -15,6 +15,7 @@
 #include <vector>
 
 #include "catgs/v1/catgs.grpc.pb.h"
+#include "server_test_util.hpp"
 
 namespace catgs::test {
 
@@ -49,10 +50,7 @@ private:
     void read_loop();
 
     const double poses_per_second_;
-    std::shared_ptr<grpc::Channel> channel_;
-    grpc::ClientContext context_;
-    std::unique_ptr<v1::RenderService::Stub> stub_;
-    std::unique_ptr<grpc::ClientReaderWriter<v1::StreamRequest, v1::Frame>> stream_;
+    StreamClient call_;
     std::atomic<bool> stop_{false};
     std::atomic<std::uint64_t> last_received_{0};
     std::atomic<int> error_frames_{0};
@@ -77,10 +75,7 @@ public:
     std::uint64_t poses_sent() const { return sent_; }
 
 private:
-    std::shared_ptr<grpc::Channel> channel_;
-    grpc::ClientContext context_;
-    std::unique_ptr<v1::RenderService::Stub> stub_;
-    std::unique_ptr<grpc::ClientReaderWriter<v1::StreamRequest, v1::Frame>> stream_;
+    StreamClient call_;
     std::atomic<bool> stop_{false};
     std::atomic<std::uint64_t> sent_{0};
     std::thread sender_;
@@ -96,10 +91,7 @@ public:
     int frames() const { return frames_; }
 
 private:
-    std::shared_ptr<grpc::Channel> channel_;
-    grpc::ClientContext context_;
-    std::unique_ptr<v1::RenderService::Stub> stub_;
-    std::unique_ptr<grpc::ClientReaderWriter<v1::StreamRequest, v1::Frame>> stream_;
+    StreamClient call_;
     std::atomic<bool> stop_{false};
     std::atomic<std::uint64_t> last_received_{0};
     std::atomic<int> frames_{0};

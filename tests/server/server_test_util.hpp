@@ -178,10 +178,11 @@ struct StreamClient {
     std::unique_ptr<v1::RenderService::Stub> stub;
     std::unique_ptr<grpc::ClientReaderWriter<v1::StreamRequest, v1::Frame>> stream;
 
-    explicit StreamClient(const std::shared_ptr<grpc::Channel>& channel, const std::string& authorization = "")
+    explicit StreamClient(const std::shared_ptr<grpc::Channel>& channel, const std::string& authorization = "",
+                          std::chrono::seconds deadline = std::chrono::seconds(60))
         : stub(v1::RenderService::NewStub(channel)) {
         if (!authorization.empty()) context.AddMetadata("authorization", authorization);
-        context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(60));
+        context.set_deadline(std::chrono::system_clock::now() + deadline);
         stream = stub->Stream(&context);
     }
     bool open(const v1::SessionConfig& config) { return stream->Write(open_message(config)); }
