@@ -20,7 +20,6 @@ public:
 
 private:
     mutable std::vector<double> samples_;
-    mutable bool sorted_ = false;
 };
 
 }  // namespace catgs::client
