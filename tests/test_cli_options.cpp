@@ -3,6 +3,7 @@
 
 #include <cmath>
 #include <string>
+#include <tuple>
 
 #include "catgs/render_options.hpp"
 #include "cli_options.hpp"
@@ -35,6 +36,37 @@ TEST(CliOptions, ReuseOrderDefaultReadsAsAPersonWritesIt) {
         f.reuse_order_max_deg = value;
         catgs::cli::add_pipeline_flags(other, f);
         EXPECT_NE(other.help().find(std::string("--reuse-order-max-deg ") + shown), std::string::npos) << other.help();
+    }
+}
+
+}  // namespace
+
+namespace {
+
+/// --spz-axes takes rdf or rub in any case (without the flag the caller's value, rdf in the
+/// tools, stays), and names the flag and the words it takes when given anything else.
+TEST(CliOptions, SpzAxesTakesRdfOrRub) {
+    for (const auto& [args, start, expected] :
+         {std::tuple{"", catgs::SpzAxes::rub, catgs::SpzAxes::rub},
+          std::tuple{"--spz-axes rub", catgs::SpzAxes::rdf, catgs::SpzAxes::rub},
+          std::tuple{"--spz-axes RUB", catgs::SpzAxes::rdf, catgs::SpzAxes::rub},
+          std::tuple{"--spz-axes rdf", catgs::SpzAxes::rub, catgs::SpzAxes::rdf}}) {
+        CLI::App app{"test"};
+        std::string scene;
+        catgs::SpzAxes axes = start;
+        catgs::cli::add_scene_flags(app, scene, axes);
+        app.parse(args, false);
+        EXPECT_EQ(axes, expected) << "'" << args << "'";
+    }
+    CLI::App app{"test"};
+    std::string scene;
+    catgs::SpzAxes axes = catgs::SpzAxes::rdf;
+    catgs::cli::add_scene_flags(app, scene, axes);
+    try {
+        app.parse("--spz-axes luf", false);
+        FAIL() << "luf accepted";
+    } catch (const CLI::ParseError& e) {
+        EXPECT_NE(std::string(e.what()).find("--spz-axes: luf not in {rdf,rub}"), std::string::npos) << e.what();
     }
 }
 

@@ -32,6 +32,7 @@ constexpr double kPsnrCap = 100.0;
 
 struct Options {
     std::string scene = "builtin:city?gaussians=1000000&seed=1";
+    catgs::SpzAxes spz_axes = catgs::SpzAxes::rdf;
     std::string grid = "1x1";
     int sh_degree = -1;  // -1: the scene's
     std::string up = "z";
@@ -277,6 +278,7 @@ int run(const Options& o) {
     const std::vector<Config> configs = make_configs(o);
 
     catgs::LoadOptions load;
+    load.spz_axes = o.spz_axes;
     load.progress = catgs::stderr_progress(!o.quiet);
     auto scene = std::make_shared<catgs::Scene>(catgs::load_scene(o.scene, load));
     if (grid_x * grid_y > 1) *scene = catgs::replicate_grid(*scene, grid_x, grid_y, up_axis);
@@ -329,10 +331,7 @@ int run(const Options& o) {
 int main(int argc, char** argv) {
     Options o;
     CLI::App app{"catgs-bench: per-stage timings of a renderer along a camera path, and time against error"};
-    app.add_option("--scene", o.scene,
-                   "scene file (PLY, compressed PLY, .splat, .spz, .sog, meta.json, .glb: docs/scene-formats.md), or "
-                   "builtin:city?gaussians=N&seed=S")
-        ->capture_default_str();
+    catgs::cli::add_scene_flags(app, o.scene, o.spz_axes);
     app.add_option("--sh-degree", o.sh_degree,
                    "render with the SH coefficients above this degree (0..3) dropped; 0: view-independent colour "
                    "(default: the scene's degree)")

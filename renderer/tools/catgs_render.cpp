@@ -24,6 +24,7 @@ namespace {
 
 struct Options {
     std::string scene = "builtin:city?gaussians=200000&seed=1";
+    catgs::SpzAxes spz_axes = catgs::SpzAxes::rdf;
     std::string cameras;
     std::string trajectory;
     std::string out;
@@ -138,6 +139,7 @@ int run(const Options& o) {
         throw catgs::Error("--cameras and --trajectory are exclusive: give one camera source");
 
     catgs::LoadOptions load;
+    load.spz_axes = o.spz_axes;
     load.drop_invalid = o.drop_invalid;
     load.progress = catgs::stderr_progress(!o.quiet);
     catgs::LoadReport report;
@@ -249,10 +251,7 @@ int run(const Options& o) {
 int main(int argc, char** argv) {
     Options o;
     CLI::App app{"catgs-render: render a 3D Gaussian Splatting scene along a camera path"};
-    app.add_option("--scene", o.scene,
-                   "scene file (PLY, compressed PLY, .splat, .spz, .sog, meta.json, .glb: docs/scene-formats.md), or "
-                   "builtin:city?gaussians=N&seed=S")
-        ->capture_default_str();
+    catgs::cli::add_scene_flags(app, o.scene, o.spz_axes);
     app.add_option("--cameras", o.cameras, "graphdeco cameras.json (uses its own intrinsics)");
     app.add_option("--trajectory", o.trajectory,
                    "trajectory file, or builtin:survey|orbit|flythrough|hover?speed=&fps=&altitude=&pitch=&frames= "

@@ -167,6 +167,24 @@ std::string describe_pipeline(const RenderOptions& o) {
     return s;
 }
 
+void add_scene_flags(CLI::App& app, std::string& scene, SpzAxes& spz_axes) {
+    app.add_option("--scene", scene,
+                   "scene file (PLY, compressed PLY, .splat, .spz, .sog, meta.json, .glb: docs/scene-formats.md), or "
+                   "builtin:city?gaussians=N&seed=S")
+        ->capture_default_str();
+    app.add_option_function<std::string>(
+           "--spz-axes",
+           [&spz_axes](std::string axes) {
+               // IsMember checks without case but hands the word on as typed.
+               std::transform(axes.begin(), axes.end(), axes.begin(), [](unsigned char c) { return std::tolower(c); });
+               spz_axes = axes == "rub" ? SpzAxes::rub : SpzAxes::rdf;
+           },
+           "the axes of a .spz file's data: rdf (as splat-transform writes it) or rub (as Niantic's spz library "
+           "writes it; y and z are flipped on load)")
+        ->check(CLI::IsMember({"rdf", "rub"}, CLI::ignore_case))
+        ->default_str("rdf");
+}
+
 std::array<float, 3> parse_background(const std::string& text) {
     std::array<float, 3> rgb{};
     std::stringstream in(text);

@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "catgs/render_options.hpp"
+#include "catgs/scene_io.hpp"
 
 namespace catgs::cli {
 
@@ -38,6 +39,10 @@ void apply_pipeline_flags(const PipelineFlags& f, RenderOptions& options);
 
 /// A short description of the pipeline options for logs and benchmark tables.
 std::string describe_pipeline(const RenderOptions& o);
+
+/// --scene (a file of any format, or a builtin spec) and --spz-axes (the axes a .spz file's
+/// data is in: the format has no field for it), as catgs-render and catgs-bench take them.
+void add_scene_flags(CLI::App& app, std::string& scene, SpzAxes& spz_axes);
 
 /// catgs-render's --background "r,g,b", each in [0, 1]; throws catgs::Error naming the flag.
 std::array<float, 3> parse_background(const std::string& text);
