@@ -33,18 +33,21 @@ inline void check_scene(const Scene& scene, const LoadReport& report, const Load
     }
     for (std::size_t i = 0; i < n; ++i) {
         for (int a = 0; a < 3; ++a) {
-            require(std::isfinite(scene.positions[3 * i + a]), "non-finite position " + std::to_string(i));
-            require(std::isfinite(scene.scales[3 * i + a]), "non-finite scale " + std::to_string(i));
+            require(std::isfinite(scene.positions[3 * i + a]),
+                    [&] { return "non-finite position " + std::to_string(i); });
+            require(std::isfinite(scene.scales[3 * i + a]), [&] { return "non-finite scale " + std::to_string(i); });
         }
         double norm2 = 0;
         for (int c = 0; c < 4; ++c) {
             const double q = scene.rotations[4 * i + c];
-            require(std::isfinite(q), "non-finite rotation " + std::to_string(i));
+            require(std::isfinite(q), [&] { return "non-finite rotation " + std::to_string(i); });
             norm2 += q * q;
         }
-        require(std::fabs(norm2 - 1.0) < 1e-5, "rotation " + std::to_string(i) + " is not a unit quaternion");
+        require(std::fabs(norm2 - 1.0) < 1e-5,
+                [&] { return "rotation " + std::to_string(i) + " is not a unit quaternion"; });
         const double opacity = scene.opacities[i];
-        require(opacity >= kMinAlpha && opacity <= 1.0, "opacity " + std::to_string(i) + " outside [1/255, 1]");
+        require(opacity >= kMinAlpha && opacity <= 1.0,
+                [&] { return "opacity " + std::to_string(i) + " outside [1/255, 1]"; });
     }
     for (float v : scene.sh) require(std::isfinite(v), "non-finite SH coefficient");
 }
