@@ -320,8 +320,13 @@ public:
                  at_key(key));
         std::vector<double> out;
         out.reserve(value.size());
-        for (std::size_t i = 0; i < value.size(); ++i)
-            out.push_back(number(value[i], key + "[" + std::to_string(i) + "]"));
+        for (std::size_t i = 0; i < value.size(); ++i) {
+            // The element's key is built only for a message: a codebook has 256 elements.
+            const json& item = value[i];
+            out.push_back(item.is_number() && std::isfinite(item.get<double>())
+                              ? item.get<double>()
+                              : number(item, key + "[" + std::to_string(i) + "]"));
+        }
         return out;
     }
     /// A codebook, rounded to float as splat-transform holds it.
