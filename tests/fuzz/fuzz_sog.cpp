@@ -1,6 +1,7 @@
 // libFuzzer target: catgs::read_sog (PlayCanvas SOG: a zip of WebP textures and meta.json, or
 // an unbundled meta.json) on arbitrary bytes, with and without drop_invalid
-// (fuzz_scene_reader). The seeds are .sog files splat-transform 3.7.0 wrote (SH degree 0..3),
+// (fuzz_scene_reader). The seeds are .sog files splat-transform 3.7.0 wrote (SH degree 0..3,
+// meta.json's numbers shortened by make_seed_corpus.py, as each execution parses it twice),
 // so mutations reach the zip, meta.json and WebP layers; an unbundled meta.json names files
 // that do not exist beside the in-memory input, so that path ends at its first texture.
 

@@ -4,18 +4,27 @@
 The seeds are small valid inputs (plus a few deliberately bad ones) that show libFuzzer each
 format's structure: PLY in all three encodings and SH degrees, .splat, cameras.json,
 trajectory files and specs, command-line values, and the server's protobuf requests (encoded
-with `protoc --encode` from proto/catgs/v1/catgs.proto). Crash reproducers found by fuzzing
-are kept beside them as crash_* files and are never overwritten by this script.
+with `protoc --encode` from proto/catgs/v1/catgs.proto), and the compressed scene formats
+(.spz, compressed PLY, SOG, .glb) as splat-transform writes them. Crash reproducers found by
+fuzzing are kept beside them as crash_* files and are never overwritten by this script.
 
-Usage: python3 tests/fuzz/make_seed_corpus.py   (from anywhere; needs protoc for the requests)
+Usage: python3 tests/fuzz/make_seed_corpus.py   (from anywhere; needs protoc for the requests,
+and tests/oracle/install-deps.sh's splat-transform for the compressed formats: without it
+their seeds are left as they are)
 """
 
+import gzip
+import io
+import json
 import math
 import os
+import random
 import shutil
 import struct
 import subprocess
 import sys
+import tempfile
+import zipfile
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(os.path.dirname(HERE))
@@ -31,10 +40,12 @@ def put(target, name, data):
         f.write(data)
 
 
-def clear_seeds():
+def clear_seeds(keep=()):
     if not os.path.isdir(CORPUS):
         return
     for target in os.listdir(CORPUS):
+        if target in keep:
+            continue
         folder = os.path.join(CORPUS, target)
         for name in os.listdir(folder):
             if name.startswith("seed_"):
@@ -294,8 +305,145 @@ def request_seeds():
         put(t, name, encode("LoadSceneRequest", text))
 
 
+# ---------------------------------------------------------------------------------------
+# The compressed scene formats: what splat-transform writes from small random graphdeco PLYs.
+#
+# Each fuzz execution decodes its whole input, with coverage and ASan on every byte, so the
+# seeds are as small as the formats allow: 3 Gaussians per SH degree 0..3 (and one 257-Gaussian
+# compressed PLY, whose second chunk holds one). SOG's meta.json holds three or four codebooks
+# of 256 numbers whatever the count, ~18 characters each as splat-transform writes them: they are
+# rounded to 4 significant digits, which keeps every value finite and every index in range
+# but makes the JSON, which each execution parses twice, a third as long.
+
+SPLAT_TRANSFORM = os.path.join(ROOT, "tests", "oracle", "node_modules", ".bin", "splat-transform")
+ORACLE_TARGETS = ("fuzz_spz", "fuzz_compressed_ply", "fuzz_sog", "fuzz_glb")
+SEED_COUNT = 3
+TWO_CHUNK_COUNT = 257  # compressed PLY chunks hold 256 Gaussians
+CODEBOOK_DIGITS = 4
+ZIP_DATE = (1980, 1, 1, 0, 0, 0)  # a fixed date: the seeds do not change when regenerated
+
+
+def random_ply(path, degree, count):
+    """A binary graphdeco PLY of `count` random Gaussians (seeded by degree and count)."""
+    rng = random.Random(degree * 1000 + count)
+    rest = 3 * ((degree + 1) ** 2 - 1)
+    fields = ["x", "y", "z", "f_dc_0", "f_dc_1", "f_dc_2"] + ["f_rest_%d" % i for i in range(rest)] + \
+        ["opacity", "scale_0", "scale_1", "scale_2", "rot_0", "rot_1", "rot_2", "rot_3"]
+    with open(path, "wb") as f:
+        f.write(("ply\nformat binary_little_endian 1.0\nelement vertex %d\n" % count).encode())
+        f.write("".join("property float %s\n" % n for n in fields).encode() + b"end_header\n")
+        for _ in range(count):
+            q = [rng.gauss(0, 1) for _ in range(4)]
+            n = math.sqrt(sum(c * c for c in q))
+            row = [rng.uniform(-5, 5), rng.uniform(-3, 3), rng.uniform(1, 9)] + \
+                [rng.uniform(-1.5, 1.5) for _ in range(3)] + [rng.uniform(-0.4, 0.4) for _ in range(rest)] + \
+                [rng.uniform(-3, 5)] + [rng.uniform(-5, -1) for _ in range(3)] + [c / n for c in q]
+            f.write(struct.pack("<%df" % len(row), *row))
+
+
+def splat_transform(*args):
+    # -g cpu: SOG's SH palette is clustered on the GPU otherwise, which CI does not have.
+    subprocess.run([SPLAT_TRANSFORM, "-q", "-w", "-g", "cpu", *args], check=True)
+
+
+def read_bytes(path):
+    with open(path, "rb") as f:
+        return f.read()
+
+
+def spz_version_2(raw):
+    """Version 3's inflated payload re-encoded as version 2 (splat-transform writes only 3
+    and 4): the smallest-three rotations become version 2's (x, y, z) bytes, w >= 0."""
+    _, _, n, _, _, _, _ = struct.unpack("<IIIBBBB", raw[:16])
+    rot = 16 + n * (9 + 1 + 3 + 3)
+    v2 = bytearray(raw[:rot])
+    struct.pack_into("<I", v2, 4, 2)
+    for i in range(n):
+        bits = struct.unpack("<I", raw[rot + 4 * i:rot + 4 * i + 4])[0]
+        largest, q, norm2 = bits >> 30, [0.0] * 4, 0.0
+        for c in (3, 2, 1, 0):
+            if c == largest:
+                continue
+            mag = math.sqrt(0.5) * (bits & 511) / 511
+            q[c] = -mag if (bits >> 9) & 1 else mag
+            norm2 += q[c] * q[c]
+            bits >>= 10
+        q[largest] = math.sqrt(max(0.0, 1 - norm2))
+        sign = -1.0 if q[3] < 0 else 1.0
+        v2 += bytes(min(255, max(0, round(127.5 * (1 + sign * c)))) for c in q[:3])
+    return bytes(v2 + raw[rot + 4 * n:])
+
+
+def short_numbers(value):
+    """meta.json with every float rounded to CODEBOOK_DIGITS significant digits."""
+    if isinstance(value, float):
+        return float("%.*g" % (CODEBOOK_DIGITS, value))
+    if isinstance(value, list):
+        return [short_numbers(v) for v in value]
+    if isinstance(value, dict):
+        return {k: short_numbers(v) for k, v in value.items()}
+    return value
+
+
+def short_meta(text):
+    return json.dumps(short_numbers(json.loads(text)), separators=(",", ":")).encode()
+
+
+def short_sog(path):
+    """The .sog at `path` with its meta.json shortened, its entries stored in the same order."""
+    with zipfile.ZipFile(path) as archive:
+        entries = [(info.filename, archive.read(info)) for info in archive.infolist()]
+    out = io.BytesIO()
+    with zipfile.ZipFile(out, "w", zipfile.ZIP_STORED) as archive:
+        for name, data in entries:
+            archive.writestr(zipfile.ZipInfo(name, ZIP_DATE), short_meta(data) if name == "meta.json" else data)
+    return out.getvalue()
+
+
+def oracle_seeds():
+    work = tempfile.mkdtemp(prefix="catgs-seeds-")
+    try:
+        for degree in range(4):
+            ply_in = os.path.join(work, "in%d.ply" % degree)
+            random_ply(ply_in, degree, SEED_COUNT)
+            name = "sh%d_n%d" % (degree, SEED_COUNT)
+            out = os.path.join(work, name)
+            # .spz as the file, and its inflated payload (fuzz_spz gzips every input too, so
+            # that mutations reach the SPZ header and blocks), in versions 3 and 2.
+            splat_transform(ply_in, "--spz-version", "3", out + ".spz")
+            raw = gzip.decompress(read_bytes(out + ".spz"))
+            put("fuzz_spz", name + ".spz", read_bytes(out + ".spz"))
+            put("fuzz_spz", name + ".spz.raw", raw)
+            put("fuzz_spz", name + "_v2.spz.raw", spz_version_2(raw))
+            splat_transform(ply_in, out + ".compressed.ply")
+            put("fuzz_compressed_ply", name + ".compressed.ply", read_bytes(out + ".compressed.ply"))
+            splat_transform(ply_in, out + ".glb")
+            put("fuzz_glb", name + ".glb", read_bytes(out + ".glb"))
+            # (splat-transform clusters the SH palette from random starts: the .sog files with SH
+            # differ, equally valid, each time they are made.)
+            splat_transform(ply_in, out + ".sog")
+            put("fuzz_sog", name + ".sog", short_sog(out + ".sog"))
+            if degree in (0, 3):  # the unbundled form, without and with the SH palette
+                os.makedirs(out + "_meta")
+                splat_transform(ply_in, os.path.join(out + "_meta", "meta.json"))
+                put("fuzz_sog", name + "_meta.json", short_meta(read_bytes(os.path.join(out + "_meta", "meta.json"))))
+        ply_in = os.path.join(work, "chunks.ply")
+        random_ply(ply_in, 0, TWO_CHUNK_COUNT)
+        out = os.path.join(work, "chunks.compressed.ply")
+        splat_transform(ply_in, out)
+        put("fuzz_compressed_ply", "sh0_n%d.compressed.ply" % TWO_CHUNK_COUNT, read_bytes(out))
+    finally:
+        shutil.rmtree(work)
+
+
 def main():
-    clear_seeds()
+    oracle = os.access(SPLAT_TRANSFORM, os.X_OK)
+    if not oracle:
+        print("make_seed_corpus: %s not found (tests/oracle/install-deps.sh): the seeds of %s are kept"
+              % (SPLAT_TRANSFORM, ", ".join(ORACLE_TARGETS)), file=sys.stderr)
+    clear_seeds(keep=() if oracle else ORACLE_TARGETS)
+    if oracle:
+        oracle_seeds()
     ply_seeds()
     splat_seeds()
     camera_seeds()
