@@ -396,8 +396,9 @@ TEST(ShardedRenderer, BuiltinCityWithoutStraddlersIsExactUpToTheStopRule) {
     for (std::size_t i = 0; i < city.count(); ++i) {
         const double e = gaussian_shard_extent(city, i);
         for (const ShardNode& n : plan.nodes) {
+            if (n.shard >= 0) continue;  // a leaf: no plane (axis -1)
             const double p = city.positions[3 * i + static_cast<std::size_t>(n.axis)];
-            if (n.shard < 0 && p - e < n.plane && p + e >= n.plane && city.opacities[i] > 0) {
+            if (p - e < n.plane && p + e >= n.plane && city.opacities[i] > 0) {
                 city.opacities[i] = 0;
                 ++removed;
             }
