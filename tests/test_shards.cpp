@@ -55,6 +55,16 @@ Scene chunked_random_scene(std::uint64_t seed, std::size_t count) {
     return s;
 }
 
+/// The built-in city of the city tests (40k Gaussians), chunked as load_scene chunks it.
+Scene chunked_city(std::uint64_t seed) {
+    CityParams params;
+    params.gaussians = 40000;
+    params.seed = seed;
+    Scene city = make_city(params);
+    partition_into_chunks(city);
+    return city;
+}
+
 /// The random scenes' cameras: head-on, and from the side at an angle, so that every axis of
 /// the plan's planes is seen from both sides across the tests.
 std::vector<Camera> random_scene_cameras() {
@@ -360,11 +370,7 @@ TEST(ShardedRenderer, RandomScenesStayCloseToTheUnshardedFrame) {
 // abs 0.40), less a margin for fresh seeds, far above the reversed composite (17.3-22.2 dB).
 // k = 1 is the unsharded frame, bit for bit.
 TEST(ShardedRenderer, BuiltinCityStaysCloseToTheUnshardedFrame) {
-    CityParams params;
-    params.gaussians = 40000;
-    params.seed = test::fresh_seed("city sharded");
-    Scene city = make_city(params);
-    partition_into_chunks(city);
+    Scene city = chunked_city(test::fresh_seed("city sharded"));
     const std::vector<Camera> cameras = city_cameras(city);
     RenderOptions options;
     options.background = {0.5f, 0.7f, 0.9f};
@@ -385,20 +391,14 @@ TEST(ShardedRenderer, BuiltinCityStaysCloseToTheUnshardedFrame) {
 // below 1e-4 / (1 - kMaxAlpha) = 1e-2 (colours and background in [0, 1]). Measured over 28 seeds
 // (56 frames): at most 3.8e-3 (PSNR 74.9 dB and up), against 0.40 with the straddlers.
 TEST(ShardedRenderer, BuiltinCityWithoutStraddlersIsExactUpToTheStopRule) {
-    CityParams params;
-    params.gaussians = 40000;
-    params.seed = test::fresh_seed("city without straddlers");
-    Scene city = make_city(params);
-    partition_into_chunks(city);
+    Scene city = chunked_city(test::fresh_seed("city without straddlers"));
     const int k = 8;
     ShardPlan plan = plan_shards(city, k);
     std::size_t removed = 0;
     for (std::size_t i = 0; i < city.count(); ++i) {
-        const double e = gaussian_shard_extent(city, i);
         for (const ShardNode& n : plan.nodes) {
             if (n.shard >= 0) continue;  // a leaf: no plane (axis -1)
-            const double p = city.positions[3 * i + static_cast<std::size_t>(n.axis)];
-            if (p - e < n.plane && p + e >= n.plane && city.opacities[i] > 0) {
+            if (straddles_plane(city, i, n.axis, n.plane) && city.opacities[i] > 0) {
                 city.opacities[i] = 0;
                 ++removed;
             }

@@ -130,11 +130,7 @@ Cut choose_cut(const Scene& scene, const std::vector<std::uint32_t>& all_members
 /// The node's Gaussians whose extent crosses the plane (as choose_cut counts them).
 std::uint64_t count_straddling(const Scene& scene, const std::vector<std::uint32_t>& members, int axis, double plane) {
     std::uint64_t count = 0;
-    for (std::uint32_t i : members) {
-        const double p = scene.positions[3 * static_cast<std::size_t>(i) + static_cast<std::size_t>(axis)];
-        const double e = gaussian_shard_extent(scene, i);
-        count += p - e < plane && p + e >= plane;  // false for a non-finite mean
-    }
+    for (std::uint32_t i : members) count += straddles_plane(scene, i, axis, plane);
     return count;
 }
 
@@ -186,6 +182,12 @@ void visit(const ShardPlan& plan, int node, const std::array<double, 3>& eye, st
 }
 
 }  // namespace
+
+bool straddles_plane(const Scene& scene, std::size_t i, int axis, double plane) {
+    const double p = scene.positions[3 * i + static_cast<std::size_t>(axis)];
+    const double e = gaussian_shard_extent(scene, i);
+    return p - e < plane && p + e >= plane;  // false for a non-finite mean
+}
 
 double gaussian_shard_extent(const Scene& scene, std::size_t i) {
     const double opacity = scene.opacities[i];

@@ -64,6 +64,10 @@ struct ShardPlan {
 /// +inf when a scale or the opacity is not finite.
 double gaussian_shard_extent(const Scene& scene, std::size_t i);
 
+/// Whether Gaussian i's extent (gaussian_shard_extent) crosses the plane at `plane` on `axis`
+/// (relative to the scene origin): the straddlers a plan counts. False for a non-finite mean.
+bool straddles_plane(const Scene& scene, std::size_t i, int axis, double plane);
+
 /// Cuts `scene` into `shards` shards, each node choosing on at most `max_samples` of its
 /// Gaussians. Throws catgs::Error naming the problem when shards < 1, shards > kMaxShards, or
 /// shards is more than the scene's chunks (a scene without chunks counts as one).
