@@ -131,6 +131,9 @@ else
   if [ -z "$server_bin" ]; then
     skip "live probe test: no built catgs-server (build/server/catgs-server or --server-bin)"
   else
+    # The shell opens a background command's redirections in the child, after '&' returns:
+    # create the log first, or the first sed below can race the child and find no file.
+    : > "$tmp/server.err"
     "$server_bin" --address 127.0.0.1:0 --health-address 127.0.0.1:0 --backend cpu \
       --scene 'city=builtin:city?gaussians=10000' --render-workers 1 --encode-workers 1 \
       > "$tmp/server.out" 2> "$tmp/server.err" &

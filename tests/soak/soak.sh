@@ -123,6 +123,9 @@ cleanup() {
 }
 trap cleanup EXIT
 
+# Created before the server starts: a background command's redirections are opened in the
+# child, after '&' returns, and the first sed below must not find the file missing.
+: > "$out/server.out"
 "$server_bin" --address 127.0.0.1:0 --backend cpu --scene "$scene" --max-sessions "$streams" \
   --render-workers "${SOAK_RENDER_WORKERS:-2}" --render-threads "${SOAK_RENDER_THREADS:-0}" \
   > "$out/server.out" 2> "$out/server.log" &
