@@ -18,7 +18,7 @@ packages=(
   libglm-dev libopenimageio-dev libspdlog-dev libgtest-dev libgmock-dev libcli11-dev
   nlohmann-json3-dev libturbojpeg0-dev libpng-dev patchelf gnuplot-nox
   grpc-proto openssl
-  libwebp-dev libzip-dev libtinygltf-dev libboost-dev libdeflate-dev libspng-dev libssl-dev
+  libwebp-dev libzip-dev libtinygltf-dev libboost-dev libdeflate-dev libspng-dev libssl-dev libzstd-dev
 )
 
 missing=()
