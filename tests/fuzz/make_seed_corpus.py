@@ -408,11 +408,14 @@ def oracle_seeds():
             random_ply(ply_in, degree, SEED_COUNT)
             name = "sh%d_n%d" % (degree, SEED_COUNT)
             out = os.path.join(work, name)
-            # .spz as the file, and its inflated payload (fuzz_spz gzips every input too, so
-            # that mutations reach the SPZ header and blocks), in versions 3 and 2.
+            # .spz as the file (versions 3 and 4), and its inflated payload (fuzz_spz gzips every
+            # input and wraps it in ZSTD streams too, so that mutations reach the SPZ header and
+            # blocks), in versions 3 and 2.
             splat_transform(ply_in, "--spz-version", "3", out + ".spz")
             raw = gzip.decompress(read_bytes(out + ".spz"))
             put("fuzz_spz", name + ".spz", read_bytes(out + ".spz"))
+            splat_transform(ply_in, out + "_v4.spz")
+            put("fuzz_spz", name + "_v4.spz", read_bytes(out + "_v4.spz"))
             put("fuzz_spz", name + ".spz.raw", raw)
             put("fuzz_spz", name + "_v2.spz.raw", spz_version_2(raw))
             splat_transform(ply_in, out + ".compressed.ply")
