@@ -166,7 +166,7 @@ async function restart(page, webAddress) {
   const before = await state(page);
   await stopServer();
   const lost = await waitFor(page, "the connection-lost message", (s) => s.connection === "lost" && /Connection lost/.test(s.status));
-  check(true, `a stopped server shows: "${lost.status}"`);
+  check(/Reconnecting in/.test(lost.status), `a stopped server shows: "${lost.status}", with the retry to come`);
   await startServer(webAddress);
   const back = await waitFor(page, "reconnection", (s) => s.connection === "live" && s.frames > before.frames && s.status === "", CONNECT_MS);
   check(back.reconnects >= 1, `reconnected after ${back.reconnects} attempt(s), the message cleared`);
