@@ -7,8 +7,10 @@
 # Usage: tests/fuzz/long_run.sh SECONDS TARGET:K [TARGET:K ...]
 #   e.g. tests/fuzz/long_run.sh 540 fuzz_ply:4 fuzz_splat:4 fuzz_stream_request:1
 # Environment: FUZZ_BIN [build-fuzz/tests/fuzz], FUZZ_CORPUS [tests/fuzz/corpus],
-#              OUT [fuzz-long]. On a bare host, bundle the targets with deploy/bundle.sh and
-#              point FUZZ_BIN at the bundle's bin/.
+#              OUT [fuzz-long], FUZZ_TIMEOUT [10: seconds one input may take]. On a bare host,
+#              bundle the targets with deploy/bundle.sh and point FUZZ_BIN at the bundle's bin/.
+#              Run under `nice` on a machine doing other work, raise FUZZ_TIMEOUT: a starved
+#              job's input is reported as a timeout (here 10 s for inputs that take 0.2 s).
 set -uo pipefail
 root=$(cd "$(dirname "$0")/../.." && pwd)
 bin=$(realpath "${FUZZ_BIN:-$root/build-fuzz/tests/fuzz}")
@@ -24,7 +26,7 @@ for spec in "$@"; do
   d=$out/$t; mkdir -p "$d/new" "$d/art"
   # New inputs go to new/ (the checked-in corpus is only read); -jobs writes fuzz-N.log here.
   ( cd "$d" && "$bin/$t" -jobs="$k" -workers="$k" -runs=$((10000000 / k + 1)) -max_total_time="$seconds" \
-      -timeout=10 -rss_limit_mb=2048 -print_final_stats=1 -artifact_prefix="$d/art/" "$d/new" "$corpus/$t" \
+      -timeout="${FUZZ_TIMEOUT:-10}" -rss_limit_mb=2048 -print_final_stats=1 -artifact_prefix="$d/art/" "$d/new" "$corpus/$t" \
       > "$d/driver.log" 2>&1 ) &
 done
 wait
