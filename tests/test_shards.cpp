@@ -20,6 +20,7 @@
 #include "catgs/scene_ops.hpp"
 #include "catgs/shard_plan.hpp"
 #include "catgs/sharded_renderer.hpp"
+#include "shard_scenes.hpp"
 #include "test_util.hpp"
 
 namespace catgs {
@@ -283,31 +284,11 @@ TEST(ShardedRenderer, PartialIsTheFrameBeforeItsBackground) {
     EXPECT_GT(covered, partial.transmittance.size() / 10) << "the scene must cover part of the frame";
 }
 
-// Separated clusters on a 2x2x2 grid, 4 m apart with extents under 0.3 m: no Gaussian straddles
-// a plane, so k shards composite to the unsharded frame up to float rounding. Opacities stay
-// low enough that no pixel nears the stop at T = 1e-4, where a back shard, which starts its
-// blend at T = 1, would go on blending.
+// Separated clusters (shard_scenes.hpp): no Gaussian straddles a plane, so k shards composite
+// to the unsharded frame up to float rounding.
 TEST(ShardedRenderer, NoStraddlersMatchesTheUnshardedFrame) {
-    std::mt19937_64 rng(test::fresh_seed("separated clusters"));
-    std::uniform_real_distribution<double> u(0.0, 1.0);
-    test::RandomSceneParams p;
-    p.count = 8 * 1100;
-    p.sh_degree = 1;
-    Scene scene = test::random_scene(rng(), p);
-    for (std::size_t i = 0; i < scene.count(); ++i) {
-        const std::size_t cluster = i % 8;
-        const float centre[3] = {cluster & 1 ? 2.0f : -2.0f, cluster & 2 ? 2.0f : -2.0f, cluster & 4 ? 11.0f : 7.0f};
-        for (int a = 0; a < 3; ++a) {
-            scene.positions[3 * i + a] = centre[a] + static_cast<float>((2 * u(rng) - 1) * 0.5);
-            scene.scales[3 * i + a] = static_cast<float>(std::exp(-5.0 + 2.0 * u(rng)));  // <= 0.05 m
-        }
-        scene.opacities[i] = static_cast<float>(0.02 + 0.2 * u(rng));
-    }
-    scene.update_bounds();
-    partition_into_chunks(scene);
-    Camera oblique;
-    oblique.intrinsics = intrinsics_from_fov(kWidth, kHeight, kFov);
-    oblique.pose = look_at({-6, -5, -4}, {0, 0, 9}, {0, -1, 0});
+    const Scene scene = test::separated_clusters(test::fresh_seed("separated clusters"));
+    const Camera oblique = test::oblique_cluster_camera(kWidth, kHeight, kFov);
     RenderOptions options;
     options.background = {0.1f, 0.2f, 0.3f};
     for (int k : {2, 4, 8}) {

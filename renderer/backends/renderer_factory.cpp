@@ -89,6 +89,11 @@ public:
         selection_.select();
         return renderer_.render(camera, options, &out, nullptr, hints);
     }
+    FrameStats render_partial(const Camera& camera, const RenderOptions& options, PartialImage& out,
+                              const FrameHints* hints) override {
+        selection_.select();
+        return renderer_.render_partial(camera, options, out, hints);
+    }
     void reset_cache() override {
         selection_.select();
         renderer_.reset_cache();

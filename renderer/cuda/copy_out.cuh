@@ -1,5 +1,5 @@
 // copy_out: the image to host memory through pinned staging (RGB8 quantised on the device,
-// and/or float RGB).
+// and/or float RGB; a partial frame's transmittance and stops).
 #pragma once
 
 #include <cuda_runtime_api.h>
@@ -15,8 +15,12 @@ struct CopyOutArgs {
     std::size_t pixels;
     const std::uint8_t* rgb8;  // device; null: not asked for
     const float* rgb_float;
+    const float* transmittance;
+    const std::uint8_t* stopped;
     PinnedArray<std::uint8_t>* host_rgb8;
     PinnedArray<float>* host_float;
+    PinnedArray<float>* host_transmittance;
+    PinnedArray<std::uint8_t>* host_stopped;
 };
 
 /// Enqueues the copies; the host buffers are complete once the stream is synchronised.

@@ -110,63 +110,75 @@ cudaStream_t CudaRenderer<T>::stream() const {
     return impl_->stream;
 }
 
+template <typename T>
+FrameStats CudaRenderer<T>::render(const Camera& camera, const RenderOptions& options, ImageRGB8* rgb8,
+                                   ImageF* rgb_float, const FrameHints* hints) {
+    return impl_->render(camera, options, HostOutputs{rgb8, rgb_float, nullptr}, hints);
+}
+
+template <typename T>
+FrameStats CudaRenderer<T>::render_partial(const Camera& camera, const RenderOptions& options, PartialImage& out,
+                                           const FrameHints* hints) {
+    return impl_->render(camera, options, HostOutputs{nullptr, nullptr, &out}, hints);
+}
+
 // Key frame: chunk_cull -> preprocess -> scan -> keys -> sort -> ranges -> split, in bands of
 // tile rows when the pairs pass the budget; cached frame: reproject (-> keys -> sort -> ranges
 // -> split when it re-sorts); then rasterize -> merge per band, and copy_out.
 template <typename T>
-FrameStats CudaRenderer<T>::render(const Camera& camera, const RenderOptions& options, ImageRGB8* rgb8,
-                                   ImageF* rgb_float, const FrameHints* hints) {
-    Impl& m = *impl_;
-    if (!m.scene) throw Error("cuda renderer: no scene set");
+FrameStats CudaRenderer<T>::Impl::render(const Camera& camera, const RenderOptions& options, const HostOutputs& out,
+                                         const FrameHints* hints) {
+    if (!scene) throw Error("cuda renderer: no scene set");
     validate(camera.intrinsics, "camera '" + camera.name + "'");
-    Frame<T> f = m.plan_frame(camera, options, hints);
-    m.begin_frame(f, rgb8 != nullptr, rgb_float != nullptr);
+    Frame<T> f = plan_frame(camera, options, hints);
+    // A partial frame stops before the background: with zero, C + T * background is C.
+    if (out.partial) f.background = Vec3<T>{T(0), T(0), T(0)};
+    begin_frame(f, out);
     if (f.plan.key) {
-        m.chunk_cull(f);
-        m.preprocess(f);
-        m.scan(f);
+        chunk_cull(f);
+        preprocess(f);
+        scan(f);
     } else {
-        m.reproject(f);
-        f.total = m.cached_pairs;
+        reproject(f);
+        f.total = cached_pairs;
         if (f.plan.resort) {
-            m.rekey(f);
-            m.sort(f, f.total);
-            m.cached_split = m.ranges_and_split(f, f.total);
+            rekey(f);
+            sort(f, f.total);
+            cached_split = ranges_and_split(f, f.total);
         } else {
             // The key frame's lists and order as they are; the marks keep the stage times at 0.
             for (Event e : {Event::depth_order, Event::scan, Event::keys, Event::sort, Event::ranges, Event::split})
-                m.events.record(e, m.stream);
+                events.record(e, stream);
         }
-        f.split_used = m.cached_split;
+        f.split_used = cached_split;
     }
-    std::uint8_t* device_rgb8 = rgb8 ? m.buffers.pixels.image_rgb8.data() : nullptr;
-    float* device_float = rgb_float ? m.buffers.pixels.image_float.data() : nullptr;
+    const PixelOutputs device = device_outputs(out);
     for (const TileRows& rows : f.bands) {
         std::uint64_t pairs = f.total;
         if (f.plan.key) {
             const Event pass_start = f.bands.size() > 1 ? Event::band_scan : Event::scan;
-            if (f.bands.size() > 1) pairs = m.count_band(f, rows);
-            m.keys(f, rows, pairs);
-            m.sort(f, pairs);
-            f.split_used = m.ranges_and_split(f, pairs);
-            m.add_list_times(pass_start);
+            if (f.bands.size() > 1) pairs = count_band(f, rows);
+            keys(f, rows, pairs);
+            sort(f, pairs);
+            f.split_used = ranges_and_split(f, pairs);
+            add_list_times(pass_start);
         }
-        m.rasterize(f, rows, pairs, device_rgb8, device_float);
-        m.merge(f, pairs, device_rgb8, device_float);
+        rasterize(f, rows, pairs, device);
+        merge(f, pairs, device);
     }
-    if (!f.plan.key) m.add_cached_list_times();
-    m.copy_out(f, rgb8, rgb_float);
-    if (f.plan.key) m.key_rendered(f, m.host.counters.data()->frame);
-    m.last = LastFrame{true,
-                       f.total,
-                       f.tiles,
-                       m.max_extra_tasks(f, f.total),
-                       f.shared_list,
-                       f.split_used,
-                       f.bands.size() > 1,
-                       m.host.counters.data()->tasks};
-    const FrameStats stats = m.frame_stats(f);
-    m.planner.frame_rendered(f.plan, stats);
+    if (!f.plan.key) add_cached_list_times();
+    copy_out(f, out);
+    if (f.plan.key) key_rendered(f, host.counters.data()->frame);
+    last = LastFrame{true,
+                     f.total,
+                     f.tiles,
+                     max_extra_tasks(f, f.total),
+                     f.shared_list,
+                     f.split_used,
+                     f.bands.size() > 1,
+                     host.counters.data()->tasks};
+    const FrameStats stats = frame_stats(f);
+    planner.frame_rendered(f.plan, stats);
     return stats;
 }
 
@@ -201,7 +213,7 @@ Frame<T> CudaRenderer<T>::Impl::plan_frame(const Camera& camera, const RenderOpt
 /// The arenas for this frame's per-Gaussian, per-slot (chunk-compacted), per-tile and per-pixel
 /// buffers, the frame counters reset, and the frame's first mark.
 template <typename T>
-void CudaRenderer<T>::Impl::begin_frame(const Frame<T>& f, bool rgb8, bool rgb_float) {
+void CudaRenderer<T>::Impl::begin_frame(const Frame<T>& f, const HostOutputs& out) {
     const cudaStream_t s = stream;
     const std::uint64_t max_slots = static_cast<std::uint64_t>(scene->chunk_count()) * kChunkGaussians;
     GaussianBuffers<T>& g = buffers.gaussians;
@@ -215,8 +227,13 @@ void CudaRenderer<T>::Impl::begin_frame(const Frame<T>& f, bool rgb8, bool rgb_f
     t.range_end.reserve(f.tiles, s);
     t.split_slot.reserve(f.tiles, s);
     t.split_tiles.reserve(f.tiles, s);
-    if (rgb8) buffers.pixels.image_rgb8.reserve(3 * f.pixels, s);
-    if (rgb_float) buffers.pixels.image_float.reserve(3 * f.pixels, s);
+    PixelBuffers<T>& p = buffers.pixels;
+    if (out.rgb8) p.image_rgb8.reserve(3 * f.pixels, s);
+    if (out.rgb || out.partial) p.image_float.reserve(3 * f.pixels, s);
+    if (out.partial) {
+        p.image_transmittance.reserve(f.pixels, s);
+        p.image_stopped.reserve(f.pixels, s);
+    }
 
     CATGS_CUDA_CHECK(cudaMemsetAsync(frame_counters(), 0, sizeof(FrameCounters), s));
     const unsigned int far_bits = 0x7f800000u;  // +inf: the atomicMin start of the nearest depth
@@ -426,10 +443,17 @@ bool CudaRenderer<T>::Impl::ranges_and_split(const Frame<T>& f, std::uint64_t pa
     return split;
 }
 
+template <typename T>
+PixelOutputs CudaRenderer<T>::Impl::device_outputs(const HostOutputs& out) {
+    PixelBuffers<T>& p = buffers.pixels;
+    return PixelOutputs{
+        out.rgb8 ? p.image_rgb8.data() : nullptr, out.rgb || out.partial ? p.image_float.data() : nullptr,
+        out.partial ? p.image_transmittance.data() : nullptr, out.partial ? p.image_stopped.data() : nullptr};
+}
+
 /// The band's tasks: its tiles, then (bounded) extra sub-tasks.
 template <typename T>
-void CudaRenderer<T>::Impl::rasterize(const Frame<T>& f, TileRows rows, std::uint64_t pairs, std::uint8_t* rgb8,
-                                      float* rgb_float) {
+void CudaRenderer<T>::Impl::rasterize(const Frame<T>& f, TileRows rows, std::uint64_t pairs, const PixelOutputs& out) {
     events.record(Event::split, stream);
     const std::uint32_t first_tile = static_cast<std::uint32_t>(rows.begin) * f.view.tiles_x;
     const std::uint32_t band_tiles = static_cast<std::uint32_t>(rows.end - rows.begin) * f.view.tiles_x;
@@ -442,18 +466,18 @@ void CudaRenderer<T>::Impl::rasterize(const Frame<T>& f, TileRows rows, std::uin
         RasterizeArgs<T>{grid, band_tiles + max_extra, t.range_begin.data(), t.range_end.data(), t.split_slot.data(),
                          t.labels.data(), task_counters(), buffers.pairs.values[buffers.pairs.current].data(),
                          buffers.gaussians.projected.data(), f.view, f.background, f.tail,
-                         buffers.pixels.partials.data(), rgb8, rgb_float},
+                         buffers.pixels.partials.data(), out},
         stream);
     events.record(Event::rasterize, stream);
 }
 
 template <typename T>
-void CudaRenderer<T>::Impl::merge(const Frame<T>& f, std::uint64_t pairs, std::uint8_t* rgb8, float* rgb_float) {
+void CudaRenderer<T>::Impl::merge(const Frame<T>& f, std::uint64_t pairs, const PixelOutputs& out) {
     if (f.split_used) {
         const TileBuffers& t = buffers.tiles;
         cuda::merge(MergeArgs<T>{std::min<std::uint64_t>(f.tiles, max_extra_tasks(f, pairs)), t.split_tiles.data(),
                                  t.split_slot.data(), t.range_begin.data(), t.range_end.data(), task_counters(),
-                                 buffers.pixels.partials.data(), f.view, f.background, rgb8, rgb_float},
+                                 buffers.pixels.partials.data(), f.view, f.background, out},
                     stream);
     }
     events.record(Event::merge, stream);
@@ -464,25 +488,34 @@ void CudaRenderer<T>::Impl::merge(const Frame<T>& f, std::uint64_t pairs, std::u
 
 /// The image to the host, and the frame's counters.
 template <typename T>
-void CudaRenderer<T>::Impl::copy_out(const Frame<T>& f, ImageRGB8* rgb8, ImageF* rgb_float) {
+void CudaRenderer<T>::Impl::copy_out(const Frame<T>& f, const HostOutputs& out) {
     const cudaStream_t s = stream;
     events.record(Event::copy_start, s);
-    cuda::copy_out(CopyOutArgs{f.pixels, rgb8 ? buffers.pixels.image_rgb8.data() : nullptr,
-                               rgb_float ? buffers.pixels.image_float.data() : nullptr, &host.rgb8, &host.rgb_float},
+    const PixelOutputs device = device_outputs(out);
+    cuda::copy_out(CopyOutArgs{f.pixels, device.rgb8, device.rgb, device.transmittance, device.stopped, &host.rgb8,
+                               &host.rgb_float, &host.transmittance, &host.stopped},
                    s);
     events.record(Event::copy_out, s);
     CATGS_CUDA_CHECK(cudaMemcpyAsync(host.counters.data(), buffers.window.counters.data(), sizeof(Counters),
                                      cudaMemcpyDeviceToHost, s));
     CATGS_CUDA_CHECK(cudaStreamSynchronize(s));
-    if (rgb8) {
-        rgb8->width = f.view.width;
-        rgb8->height = f.view.height;
-        rgb8->rgb.assign(host.rgb8.data(), host.rgb8.data() + 3 * f.pixels);
+    if (out.rgb8) {
+        out.rgb8->width = f.view.width;
+        out.rgb8->height = f.view.height;
+        out.rgb8->rgb.assign(host.rgb8.data(), host.rgb8.data() + 3 * f.pixels);
     }
-    if (rgb_float) {
-        rgb_float->width = f.view.width;
-        rgb_float->height = f.view.height;
-        rgb_float->rgb.assign(host.rgb_float.data(), host.rgb_float.data() + 3 * f.pixels);
+    if (out.rgb) {
+        out.rgb->width = f.view.width;
+        out.rgb->height = f.view.height;
+        out.rgb->rgb.assign(host.rgb_float.data(), host.rgb_float.data() + 3 * f.pixels);
+    }
+    if (out.partial) {
+        PartialImage& p = *out.partial;
+        p.width = f.view.width;
+        p.height = f.view.height;
+        p.colour.assign(host.rgb_float.data(), host.rgb_float.data() + 3 * f.pixels);
+        p.transmittance.assign(host.transmittance.data(), host.transmittance.data() + f.pixels);
+        p.stopped.assign(host.stopped.data(), host.stopped.data() + f.pixels);
     }
     events.add(Stage::copy_out, Event::copy_start, Event::copy_out);
 }

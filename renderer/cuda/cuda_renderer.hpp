@@ -31,6 +31,7 @@
 #include "catgs/camera.hpp"
 #include "catgs/cpu_renderer.hpp"
 #include "catgs/image.hpp"
+#include "catgs/partial_image.hpp"
 #include "catgs/render_options.hpp"
 #include "catgs/scene.hpp"
 #include "catgs/stages/split.hpp"
@@ -97,6 +98,11 @@ public:
     /// (cache.hpp); `hints` may carry the client's flight plan or velocity.
     FrameStats render(const Camera& camera, const RenderOptions& options, ImageRGB8* rgb8, ImageF* rgb_float,
                       const FrameHints* hints = nullptr);
+    /// The same frame without its background (partial_image.hpp): colour R, transmittance A
+    /// and where the blend stopped, per pixel, so that C = R + A * background. What one shard
+    /// of a sharded frame contributes (sharded_renderer.hpp); options.background is ignored.
+    FrameStats render_partial(const Camera& camera, const RenderOptions& options, PartialImage& out,
+                              const FrameHints* hints = nullptr);
 
     /// Forgets the inter-frame cache and the pose history (a new stream).
     void reset_cache();

@@ -106,14 +106,20 @@ struct TileBuffers {
     }
 };
 
-/// Per pixel: the sub-tasks' partial (R, A) and the finished image.
+/// Per pixel: the sub-tasks' partial (R, A) and the finished image (a partial frame's R in
+/// image_float, with its A and stops).
 template <typename T>
 struct PixelBuffers {
     DeviceArray<Partial<T>> partials;      // rasterize: sub-task (R, A), merged by merge
     DeviceArray<std::uint8_t> image_rgb8;  // rasterize / merge
     DeviceArray<float> image_float;
+    DeviceArray<float> image_transmittance;  // render_partial
+    DeviceArray<std::uint8_t> image_stopped;
 
-    std::size_t bytes() const { return partials.bytes() + image_rgb8.bytes() + image_float.bytes(); }
+    std::size_t bytes() const {
+        return partials.bytes() + image_rgb8.bytes() + image_float.bytes() + image_transmittance.bytes() +
+               image_stopped.bytes();
+    }
 };
 
 template <typename T>
@@ -166,6 +172,8 @@ struct HostStaging {
     PinnedArray<Counters> counters;
     PinnedArray<std::uint8_t> rgb8;  // copy_out
     PinnedArray<float> rgb_float;
+    PinnedArray<float> transmittance;  // copy_out of a partial frame
+    PinnedArray<std::uint8_t> stopped;
 };
 
 }  // namespace catgs::cuda

@@ -97,21 +97,36 @@ __device__ std::uint32_t project_window(const DeviceSceneView& scene, std::uint6
     return valid;
 }
 
-/// Writes a final pixel: C + T * background, to 8-bit and/or float outputs (rasterize, merge).
+/// Where rasterize and merge write a finished pixel; any pointer may be null. A partial frame
+/// (CudaRenderer::render_partial, what a shard of a sharded frame contributes) renders with a
+/// zero background, so `rgb` holds the colour R exactly, and adds the transmittance A and
+/// whether the blend stopped (partial_image.hpp).
+struct PixelOutputs {
+    std::uint8_t* rgb8;
+    float* rgb;
+    float* transmittance;
+    std::uint8_t* stopped;
+};
+
+/// Writes a final pixel: C + T * background, to 8-bit and/or float outputs, and T and the stop
+/// for a partial frame (rasterize, merge).
 template <typename T>
-__device__ void write_pixel(const PixelAccumulator<T>& acc, Vec3<T> background, std::size_t o, std::uint8_t* out_rgb8,
-                            float* out_float) {
+__device__ void write_pixel(const PixelAccumulator<T>& acc, Vec3<T> background, std::size_t pixel,
+                            const PixelOutputs& out) {
     const Vec3<T> c = finish_pixel(acc, background);
-    if (out_rgb8) {
-        out_rgb8[o] = quantize_8bit(c.x);
-        out_rgb8[o + 1] = quantize_8bit(c.y);
-        out_rgb8[o + 2] = quantize_8bit(c.z);
+    const std::size_t o = 3 * pixel;
+    if (out.rgb8) {
+        out.rgb8[o] = quantize_8bit(c.x);
+        out.rgb8[o + 1] = quantize_8bit(c.y);
+        out.rgb8[o + 2] = quantize_8bit(c.z);
     }
-    if (out_float) {
-        out_float[o] = static_cast<float>(c.x);
-        out_float[o + 1] = static_cast<float>(c.y);
-        out_float[o + 2] = static_cast<float>(c.z);
+    if (out.rgb) {
+        out.rgb[o] = static_cast<float>(c.x);
+        out.rgb[o + 1] = static_cast<float>(c.y);
+        out.rgb[o + 2] = static_cast<float>(c.z);
     }
+    if (out.transmittance) out.transmittance[pixel] = static_cast<float>(acc.transmittance);
+    if (out.stopped) out.stopped[pixel] = acc.done ? 1 : 0;
 }
 
 }  // namespace catgs::cuda

@@ -11,7 +11,7 @@ template <typename T>
 __global__ void __launch_bounds__(kTilePixels)
     merge_kernel(const std::uint32_t* split_tiles, const std::uint32_t* split_slot, const std::uint64_t* range_begin,
                  const std::uint64_t* range_end, const TaskCounters* counters, const Partial<T>* partials, View<T> view,
-                 Vec3<T> background, std::uint8_t* out_rgb8, float* out_float) {
+                 Vec3<T> background, PixelOutputs out) {
     if (blockIdx.x >= counters->split_tiles) return;
     const std::uint32_t tile = split_tiles[blockIdx.x];
     const int x = static_cast<int>(tile % view.tiles_x) * kTileSize + threadIdx.x;
@@ -26,7 +26,8 @@ __global__ void __launch_bounds__(kTilePixels)
     PixelAccumulator<T> acc;
     acc.colour = m.colour;
     acc.transmittance = m.transmittance;
-    write_pixel(acc, background, 3 * (static_cast<std::size_t>(y) * view.width + x), out_rgb8, out_float);
+    acc.done = m.done;
+    write_pixel(acc, background, static_cast<std::size_t>(y) * view.width + x, out);
 }
 
 }  // namespace
@@ -34,8 +35,7 @@ __global__ void __launch_bounds__(kTilePixels)
 template <typename T>
 void merge(const MergeArgs<T>& a, cudaStream_t s) {
     merge_kernel<T><<<static_cast<unsigned>(a.blocks), dim3(kTileSize, kTileSize), 0, s>>>(
-        a.split_tiles, a.split_slot, a.range_begin, a.range_end, a.counters, a.partials, a.view, a.background,
-        a.out_rgb8, a.out_float);
+        a.split_tiles, a.split_slot, a.range_begin, a.range_end, a.counters, a.partials, a.view, a.background, a.out);
     CATGS_CUDA_CHECK_LAUNCH("merge_kernel");
 }
 

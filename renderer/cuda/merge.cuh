@@ -25,8 +25,7 @@ struct MergeArgs {
     const Partial<T>* partials;
     View<T> view;
     Vec3<T> background;
-    std::uint8_t* out_rgb8;  // either may be null
-    float* out_float;
+    PixelOutputs out;
 };
 
 template <typename T>

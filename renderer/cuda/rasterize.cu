@@ -37,7 +37,7 @@ __global__ void __launch_bounds__(kTilePixels)
     rasterize_kernel(TaskGrid grid, const std::uint64_t* range_begin, const std::uint64_t* range_end,
                      const std::uint32_t* split_slot, const TaskLabel* labels, const TaskCounters* counters,
                      const std::uint32_t* values, const Projected<T>* projected, View<T> view, Vec3<T> background,
-                     T tail_transmittance, Partial<T>* partials, std::uint8_t* out_rgb8, float* out_float) {
+                     T tail_transmittance, Partial<T>* partials, PixelOutputs out) {
     __shared__ Splat<T> batch[kTilePixels];
     __shared__ std::uint8_t reaches[kTilePixels];  // bit w: the Gaussian may draw in warp block w
     std::uint32_t tile, index = 0;
@@ -104,7 +104,7 @@ __global__ void __launch_bounds__(kTilePixels)
     }
     if (!inside) return;
     if (slot == kNoSlot) {
-        write_pixel(acc, background, 3 * (static_cast<std::size_t>(y) * view.width + x), out_rgb8, out_float);
+        write_pixel(acc, background, static_cast<std::size_t>(y) * view.width + x, out);
     } else {
         partials[(static_cast<std::size_t>(slot) + index) * kTilePixels + rank] =
             Partial<T>{acc.colour, acc.transmittance};
@@ -118,7 +118,7 @@ void rasterize(const RasterizeArgs<T>& a, cudaStream_t s) {
     if (a.blocks == 0) return;
     rasterize_kernel<T><<<static_cast<unsigned>(a.blocks), dim3(kTileSize, kTileSize), 0, s>>>(
         a.grid, a.range_begin, a.range_end, a.split_slot, a.labels, a.counters, a.values, a.projected, a.view,
-        a.background, a.tail_transmittance, a.partials, a.out_rgb8, a.out_float);
+        a.background, a.tail_transmittance, a.partials, a.out);
     CATGS_CUDA_CHECK_LAUNCH("rasterize_kernel");
 }
 

@@ -41,8 +41,7 @@ struct RasterizeArgs {
     Vec3<T> background;
     T tail_transmittance;  // where a split tile's later sub-tasks stop
     Partial<T>* partials;
-    std::uint8_t* out_rgb8;  // either may be null
-    float* out_float;
+    PixelOutputs out;
 };
 
 template <typename T>

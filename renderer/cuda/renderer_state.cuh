@@ -59,6 +59,13 @@ struct LastFrame {
     TaskCounters tasks{};
 };
 
+/// The host images one frame fills; any may be null, not all.
+struct HostOutputs {
+    ImageRGB8* rgb8 = nullptr;
+    ImageF* rgb = nullptr;
+    PartialImage* partial = nullptr;
+};
+
 template <typename T>
 struct CudaRenderer<T>::Impl {
     cudaStream_t stream = nullptr;
@@ -82,8 +89,12 @@ struct CudaRenderer<T>::Impl {
     /// Most pairs one pass may hold (CudaLimits::max_pairs, derived at the first frame when 0).
     std::uint64_t pair_budget();
 
+    FrameStats render(const Camera& camera, const RenderOptions& options, const HostOutputs& out,
+                      const FrameHints* hints);
     Frame<T> plan_frame(const Camera& camera, const RenderOptions& options, const FrameHints* hints);
-    void begin_frame(const Frame<T>& f, bool rgb8, bool rgb_float);
+    void begin_frame(const Frame<T>& f, const HostOutputs& out);
+    /// Where this frame's kernels write, for `out`.
+    PixelOutputs device_outputs(const HostOutputs& out);
     // A key frame's lists.
     void chunk_cull(Frame<T>& f);
     void preprocess(Frame<T>& f);
@@ -99,9 +110,9 @@ struct CudaRenderer<T>::Impl {
     // Both.
     void sort(const Frame<T>& f, std::uint64_t pairs);
     bool ranges_and_split(const Frame<T>& f, std::uint64_t pairs);
-    void rasterize(const Frame<T>& f, TileRows rows, std::uint64_t pairs, std::uint8_t* rgb8, float* rgb_float);
-    void merge(const Frame<T>& f, std::uint64_t pairs, std::uint8_t* rgb8, float* rgb_float);
-    void copy_out(const Frame<T>& f, ImageRGB8* rgb8, ImageF* rgb_float);
+    void rasterize(const Frame<T>& f, TileRows rows, std::uint64_t pairs, const PixelOutputs& out);
+    void merge(const Frame<T>& f, std::uint64_t pairs, const PixelOutputs& out);
+    void copy_out(const Frame<T>& f, const HostOutputs& out);
     void key_rendered(const Frame<T>& f, const FrameCounters& c);
     FrameStats frame_stats(const Frame<T>& f) const;
 

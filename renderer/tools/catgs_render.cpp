@@ -269,8 +269,8 @@ int main(int argc, char** argv) {
     app.add_option("--near", o.near_plane, "near plane (view-space z)")->capture_default_str();
     app.add_option("--threads", o.threads, "CPU threads (0: all)")->capture_default_str();
     app.add_option("--shards", o.shards,
-                   "render each frame as K spatial shards of the scene, one renderer each, composited front to back "
-                   "(docs/sharding.md; the cpu backend: cuda has no partial output yet)")
+                   "render each frame as K spatial shards of the scene, one renderer each (taking turns on the "
+                   "backend's device), composited front to back (docs/sharding.md)")
         ->capture_default_str()
         ->check(CLI::Range(1, catgs::kMaxShards));
     app.add_option("--max-frames", o.max_frames, "render at most this many cameras (-1: all)")->capture_default_str();
