@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstdint>
 #include <random>
+#include <vector>
 
 #include "catgs/camera.hpp"
 #include "catgs/scene.hpp"
@@ -36,6 +37,18 @@ inline Scene separated_clusters(std::uint64_t seed) {
     scene.update_bounds();
     partition_into_chunks(scene);
     return scene;
+}
+
+/// Random scenes' cameras (random_scene puts them in front of forward_camera): head-on, and
+/// from the side at an angle, so that every axis of the plan's planes is seen from both sides
+/// across the tests.
+inline std::vector<Camera> random_scene_cameras(int width, int height, double fov) {
+    std::vector<Camera> cameras{forward_camera(width, height, fov)};
+    Camera side;
+    side.intrinsics = intrinsics_from_fov(width, height, fov);
+    side.pose = look_at({9, -4, 1}, {0, 0, 7}, {0, -1, 0});
+    cameras.push_back(side);
+    return cameras;
 }
 
 /// The separated clusters seen from below, behind and to the side: every plane from its other

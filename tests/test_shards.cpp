@@ -66,15 +66,8 @@ Scene chunked_city(std::uint64_t seed) {
     return city;
 }
 
-/// The random scenes' cameras: head-on, and from the side at an angle, so that every axis of
-/// the plan's planes is seen from both sides across the tests.
 std::vector<Camera> random_scene_cameras() {
-    std::vector<Camera> cameras{test::forward_camera(kWidth, kHeight, kFov)};
-    Camera side;
-    side.intrinsics = intrinsics_from_fov(kWidth, kHeight, kFov);
-    side.pose = look_at({9, -4, 1}, {0, 0, 7}, {0, -1, 0});
-    cameras.push_back(side);
-    return cameras;
+    return test::random_scene_cameras(kWidth, kHeight, kFov);
 }
 
 /// The city from a survey altitude at an angle, from two opposite sides.

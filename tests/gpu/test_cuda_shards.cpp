@@ -80,12 +80,7 @@ PartialImage cpu_partial(const Scene& scene, const Camera& camera, const RenderO
 }
 
 std::vector<Camera> cameras() {
-    std::vector<Camera> out{test::forward_camera(kWidth, kHeight, kFov)};
-    Camera side;
-    side.intrinsics = intrinsics_from_fov(kWidth, kHeight, kFov);
-    side.pose = look_at({9, -4, 1}, {0, 0, 7}, {0, -1, 0});
-    out.push_back(side);
-    return out;
+    return test::random_scene_cameras(kWidth, kHeight, kFov);
 }
 
 /// The plain pipeline, and split k = 64 so that most tiles' pixels come from merge.
