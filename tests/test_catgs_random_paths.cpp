@@ -147,8 +147,8 @@ const char* hints_name(Hints h) {
 /// A random flight from the origin looking down +z: it holds its linear and angular velocity
 /// for a while, then changes them (a new direction and speed up to 20 m/s, a turn up to 2.5
 /// rad/s about any camera axis, a stop, or a hover with a slow drift), at 30 or 60 frames per
-/// second with jittered intervals.
-std::vector<Camera> random_path(std::mt19937_64& rng, const Intrinsics& k, int frames) {
+/// second with jittered intervals; now and then the viewer zooms or resizes its window.
+std::vector<Camera> random_path(std::mt19937_64& rng, Intrinsics k, int frames) {
     std::uniform_real_distribution<double> u(0.0, 1.0);
     std::normal_distribution<double> normal(0.0, 1.0);
     const double fps = u(rng) < 0.5 ? 30.0 : 60.0;
@@ -180,6 +180,10 @@ std::vector<Camera> random_path(std::mt19937_64& rng, const Intrinsics& k, int f
         } else if (change < 0.24) {  // hover: a slow drift
             for (double& v : velocity) v = 0.05 * normal(rng);
             for (double& w : spin) w = 0.002 * normal(rng);
+        } else if (change < 0.26) {  // a zoom, or a resized window
+            const bool resize = u(rng) < 0.5;
+            k = intrinsics_from_fov(resize ? 64 + static_cast<int>(rng() % 96) : k.width,
+                                    resize ? 48 + static_cast<int>(rng() % 72) : k.height, 30.0 + 100.0 * u(rng));
         }
         const double dt = (1.0 / fps) * (0.7 + 0.6 * u(rng));
         t += dt;
