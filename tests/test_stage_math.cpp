@@ -17,6 +17,7 @@
 #include <limits>
 #include <numeric>
 #include <random>
+#include <string>
 #include <vector>
 
 #include "catgs/constants.hpp"
@@ -365,6 +366,92 @@ TEST(StageTiles, EllipseTouchesTileWhereTheEllipseReachesTheTilesPixelCentres) {
               << " from the level" << std::endl;
     EXPECT_GT(touched, 1000);
     EXPECT_GT(missed, 1000);
+}
+
+/// The tile sets of for_each_window_tile (row spans) against the per-tile reference: a tile is
+/// in the union when some pose's rectangle holds it and that pose's ellipse reaches it
+/// (reference_min_q <= level). Returns the tiles decided within `band` (relative) of a level,
+/// where either answer is sound.
+template <typename T>
+int check_row_spans(const std::vector<Projected<T>>& poses, int width, int height, double guard, double band,
+                    int& touched, const std::string& where) {
+    View<T> view{};
+    view.width = width;
+    view.height = height;
+    view.tiles_x = tiles_for(width);
+    view.tiles_y = tiles_for(height);
+    std::vector<int> emitted(static_cast<std::size_t>(view.tiles_x * view.tiles_y), 0);
+    Projected<T> window[kMaxWindow];
+    std::copy(poses.begin(), poses.end(), window);
+    const std::uint32_t valid = (1u << poses.size()) - 1u;
+    const std::uint32_t n =
+        for_each_window_tile<kMaxWindow>(window, valid, static_cast<int>(poses.size()), Culling::opacity_aware,
+                                         static_cast<T>(guard), view, [&](std::uint32_t t) { ++emitted[t]; });
+    int near_level = 0, counted = 0;
+    for (int ty = 0; ty < view.tiles_y; ++ty)
+        for (int tx = 0; tx < view.tiles_x; ++tx) {
+            const int got = emitted[static_cast<std::size_t>(ty * view.tiles_x + tx)];
+            counted += got;
+            EXPECT_LE(got, 1) << where << " tile " << tx << "," << ty << " emitted twice";
+            bool expected = false, close = false;
+            for (const Projected<T>& g : poses) {
+                const TileRect r =
+                    tile_rect(g, Culling::opacity_aware, view.tiles_x, view.tiles_y, static_cast<T>(guard));
+                if (tx < r.x0 || tx >= r.x1 || ty < r.y0 || ty >= r.y1) continue;
+                const double level = static_cast<double>(opacity_level(g.opacity));
+                Projected<double> d{};
+                d.mean = {static_cast<double>(g.mean.x), static_cast<double>(g.mean.y)};
+                d.conic = {static_cast<double>(g.conic.x), static_cast<double>(g.conic.y),
+                           static_cast<double>(g.conic.z)};
+                const double min_q = reference_min_q(d, tx, ty, width, height, guard);
+                expected = expected || min_q <= level;
+                close = close || std::fabs(min_q - level) <= band * std::max(1.0, level);
+            }
+            touched += got;
+            if (close) {
+                ++near_level;
+                continue;
+            }
+            EXPECT_EQ(got == 1, expected) << where << " tile " << tx << "," << ty;
+        }
+    EXPECT_EQ(static_cast<int>(n), counted) << where;
+    return near_level;
+}
+
+// The row spans give the tiles the per-tile test gives (ellipse_touches_tile, here through its
+// ternary-search reference), one pose or the union of a window's, with and without a guard:
+// exactly in double except within 1e-9 of a level, and in float except within 1e-6 (the
+// inputs are the same floats; the spans are computed in double either way).
+TEST(StageTiles, RowSpansAreTheTilesThePerTileTestTouches) {
+    const std::uint64_t seed = test::fresh_seed("stage row spans");
+    std::mt19937_64 rng(seed);
+    int touched = 0, near_level = 0;
+    for (int i = 0; i < 1200; ++i) {
+        const int width = static_cast<int>(stage::uniform(rng, 17, 400)),
+                  height = static_cast<int>(stage::uniform(rng, 17, 300));
+        const int window = i % 3 == 0 ? static_cast<int>(stage::uniform(rng, 2, 6)) : 1;
+        std::vector<Projected<float>> pf;
+        const Projected<float> first = stage::random_projected<float>(rng, width, height);
+        for (int k = 0; k < window; ++k) {
+            // A window's poses see the same Gaussian a little moved and reshaped.
+            Projected<float> g = k == 0 ? first : stage::random_projected<float>(rng, width, height);
+            if (k > 0) {
+                g.mean = {first.mean.x + static_cast<float>(stage::uniform(rng, -20, 20)),
+                          first.mean.y + static_cast<float>(stage::uniform(rng, -20, 20))};
+                g.opacity = first.opacity;
+            }
+            pf.push_back(g);
+        }
+        std::vector<Projected<double>> pd;
+        for (const Projected<float>& g : pf) pd.push_back(stage::widened(g));
+        const double guard = i % 4 == 0 ? stage::uniform(rng, 0, 6) : 0.0;
+        const std::string where = "case " + std::to_string(i) + " (CATGS_TEST_SEED=" + std::to_string(seed) + ")";
+        near_level += check_row_spans(pd, width, height, guard, 1e-9, touched, "double " + where);
+        check_row_spans(pf, width, height, guard, 1e-6, touched, "float " + where);
+    }
+    std::cout << "[stage] row spans: " << touched << " tiles touched, " << near_level << " within 1e-9 of a level"
+              << std::endl;
+    EXPECT_GT(touched, 5000);
 }
 
 // --- Sort keys ---------------------------------------------------------------------------

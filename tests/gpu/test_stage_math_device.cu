@@ -272,6 +272,57 @@ TEST_F(StageDevice, EllipseTileTestIsTheHosts) {
     EXPECT_GT(missed, 1000);
 }
 
+/// The tiles one Gaussian reaches through the row spans (for_each_touched_tile): their count
+/// and a digest of their ids, so host and device can be compared per Gaussian.
+struct TileSetDigest {
+    std::uint32_t count;
+    std::uint64_t digest;
+};
+
+template <typename T>
+__host__ __device__ TileSetDigest touched_digest(const Projected<T>& g, const View<T>& view, T guard) {
+    TileSetDigest d{0, 0};
+    d.count = for_each_window_tile<1>(&g, 1u, 1, Culling::opacity_aware, guard, view,
+                                      [&](std::uint32_t t) { d.digest = d.digest * 1000003u + t + 1u; });
+    return d;
+}
+
+__global__ void row_span_kernel(const Projected<float>* g, const float* guard, int n, View<float> view,
+                                TileSetDigest* out) {
+    const int i = thread_index();
+    if (i < n) out[i] = touched_digest(g[i], view, guard[i]);
+}
+
+TEST_F(StageDevice, RowSpanTilesAreTheHosts) {
+    const std::uint64_t seed = test::fresh_seed("stage device row spans");
+    std::mt19937_64 rng(seed);
+    std::uint64_t touched = 0;
+    for (int trial = 0; trial < 10; ++trial) {
+        View<float> view{};
+        view.width = static_cast<int>(stage::uniform(rng, 17, 900));
+        view.height = static_cast<int>(stage::uniform(rng, 17, 600));
+        view.tiles_x = tiles_for(view.width);
+        view.tiles_y = tiles_for(view.height);
+        const std::vector<Projected<float>> g = agreeing_projected(rng, 5000, view.width, view.height);
+        std::vector<float> guard;
+        for (std::size_t i = 0; i < g.size(); ++i)
+            guard.push_back(i % 3 == 0 ? static_cast<float>(stage::uniform(rng, 0, 8)) : 0.0f);
+        DeviceArray<Projected<float>> in(g);
+        DeviceArray<float> guards(guard);
+        DeviceArray<TileSetDigest> out(g.size());
+        launch(g.size(), "row_span_kernel", row_span_kernel, in.get(), guards.get(), static_cast<int>(g.size()), view,
+               out.get());
+        const std::vector<TileSetDigest> device = out.download();
+        for (std::size_t i = 0; i < g.size(); ++i) {
+            const TileSetDigest host = touched_digest(g[i], view, guard[i]);
+            touched += host.count;
+            EXPECT_EQ(device[i].count, host.count) << "gaussian " << i << seed_note(seed);
+            EXPECT_EQ(device[i].digest, host.digest) << "gaussian " << i << seed_note(seed);
+        }
+    }
+    EXPECT_GT(touched, 10000u);
+}
+
 // --- Sort keys ---------------------------------------------------------------------------
 
 __global__ void keys_kernel(const std::uint32_t* tiles, const float* depths, int n, std::uint64_t* keys,

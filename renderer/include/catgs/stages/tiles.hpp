@@ -104,25 +104,104 @@ struct TileRows {
     int end = 1 << 30;
 };
 
-/// Is tile (tx, ty) in the footprint whose tile rectangle is `rect`? The per-tile half of
-/// the predicate, also used on its own by cached frames to drop pairs the current pose no
-/// longer needs.
+/// The tiles [x0, x1) of one tile row that a footprint reaches, within its rectangle.
+struct TileSpan {
+    int x0, x1;
+};
+
+/// The opacity-aware ellipse q(d) <= level of one Gaussian, set up to give, row by row, the
+/// tiles it reaches: the same tiles as ellipse_touches_tile on each tile of the row, found
+/// without testing them one by one. The band of a tile row (its pixel centres' rows, grown by
+/// the guard) cuts a convex piece from the ellipse whose x-extent is an interval, and a tile
+/// of the row touches the ellipse exactly where its pixel-centre columns (grown by the guard)
+/// meet that interval. The ends of the interval are the ellipse's boundary at the rows
+/// nearest its leftmost and rightmost points: a few square roots per row instead of four edge
+/// minimisations per tile, which made the tile test most of preprocess and keys at 4K.
+///
+/// Computed in double whatever T is: near the top and bottom of the ellipse the boundary is
+/// the square root of a small difference, which float would round by a good part of a pixel.
+/// The level's own slack (kOpacityLevelRelativeSlack) covers the float rasterizer's rounding.
 template <typename T>
-CATGS_HD bool footprint_in_tile(const Projected<T>& g, Culling mode, const TileRect& rect, int tx, int ty,
-                                const View<T>& view, T guard = T(0)) {
-    return tx >= rect.x0 && tx < rect.x1 && ty >= rect.y0 && ty < rect.y1 &&
-           (mode != Culling::opacity_aware ||
-            ellipse_touches_tile(g, opacity_level(g.opacity), tx, ty, view.width, view.height, guard));
+struct EllipseRows {
+    double mean_x, mean_y, a, b, level, det, half_y, peak_dy;
+    bool usable;  // false: a conic that is not positive definite (the tile test decides)
+
+    CATGS_HD EllipseRows(const Projected<T>& g, T level_t)
+        : mean_x(static_cast<double>(g.mean.x)),
+          mean_y(static_cast<double>(g.mean.y)),
+          a(static_cast<double>(g.conic.x)),
+          b(static_cast<double>(g.conic.y)),
+          level(static_cast<double>(level_t)),
+          det(0),
+          half_y(0),
+          peak_dy(0) {
+        const double c = static_cast<double>(g.conic.z);
+        det = a * c - b * b;
+        usable = a > 0 && c > 0 && det > 0 && level > 0 && is_finite(a * c) && is_finite(level) && is_finite(mean_x) &&
+                 is_finite(mean_y);
+        if (!usable) return;
+        half_y = sqrt_of(level * a / det);         // the ellipse's y half-extent
+        peak_dy = b * sqrt_of(level / (det * c));  // the leftmost point's dy; the rightmost's is -peak_dy
+        usable = is_finite(half_y) && is_finite(peak_dy);
+    }
+
+    /// The tiles of row ty within `rect` whose pixel-centre rectangle, grown by `guard`,
+    /// meets the ellipse (clipped to the image as ellipse_touches_tile clips it).
+    template <typename V>
+    CATGS_HD TileSpan span(int ty, const TileRect& rect, const View<V>& view, double guard) const {
+        const int py0 = ty * kTileSize, py1 = (py0 + kTileSize < view.height ? py0 + kTileSize : view.height) - 1;
+        double y0 = py0 + 0.5 - guard - mean_y, y1 = py1 + 0.5 + guard - mean_y;
+        y0 = y0 > -half_y ? y0 : -half_y;
+        y1 = y1 < half_y ? y1 : half_y;
+        if (!(y0 <= y1)) return {rect.x0, rect.x0};
+        const double right_dy = -peak_dy < y0 ? y0 : (-peak_dy > y1 ? y1 : -peak_dy);
+        const double left_dy = peak_dy < y0 ? y0 : (peak_dy > y1 ? y1 : peak_dy);
+        const double right = mean_x + (-b * right_dy + root(right_dy)) / a + guard;
+        const double left = mean_x + (-b * left_dy - root(left_dy)) / a - guard;
+        // Tile tx's pixel-centre columns: [16 tx + 0.5, min(16 tx + 16, width) - 0.5].
+        if (!(left <= view.width - 0.5)) return {rect.x0, rect.x0};
+        const int first = -clamped_floor(-(left - (kTileSize - 0.5)) / kTileSize, -(1 << 30), 1 << 30);
+        const int last = clamped_floor((right - 0.5) / kTileSize, -(1 << 30), 1 << 30);
+        const int x0 = first > rect.x0 ? first : rect.x0, x1 = last + 1 < rect.x1 ? last + 1 : rect.x1;
+        return x0 < x1 ? TileSpan{x0, x1} : TileSpan{rect.x0, rect.x0};
+    }
+
+private:
+    /// a * (the ellipse's half-width at row offset dy): sqrt(a level - det dy^2), 0 at its top and bottom.
+    CATGS_HD double root(double dy) const {
+        const double r = level * a - det * dy * dy;
+        return r > 0 ? sqrt_of(r) : 0.0;
+    }
+};
+
+/// The tiles of row ty that a footprint with tile rectangle `rect` touches under `mode`.
+template <typename T>
+CATGS_HD TileSpan footprint_row(const Projected<T>& g, Culling mode, const TileRect& rect, int ty, const View<T>& view,
+                                T guard, const EllipseRows<T>& rows) {
+    if (ty < rect.y0 || ty >= rect.y1) return {rect.x0, rect.x0};
+    if (mode != Culling::opacity_aware) return {rect.x0, rect.x1};
+    if (rows.usable) return rows.span(ty, rect, view, static_cast<double>(guard));
+    // A conic that is not positive definite: ask each tile (rare; NaN reaches no tile).
+    const T level = opacity_level(g.opacity);
+    int x0 = rect.x1, x1 = rect.x0;
+    for (int tx = rect.x0; tx < rect.x1; ++tx)
+        if (ellipse_touches_tile(g, level, tx, ty, view.width, view.height, guard)) {
+            x0 = tx < x0 ? tx : x0;
+            x1 = tx + 1;
+        }
+    return x0 < x1 ? TileSpan{x0, x1} : TileSpan{rect.x0, rect.x0};
 }
 
 /// Does a single-frame footprint touch tile `tile`? Exactly the tiles for_each_touched_tile
-/// emits (exact mode: every tile).
+/// emits (exact mode: every tile), through the same row spans.
 template <typename T>
 CATGS_HD bool touches_tile(const Projected<T>& g, Culling mode, const View<T>& view, std::uint32_t tile) {
     if (mode == Culling::exact) return true;
     const TileRect r = tile_rect(g, mode, view.tiles_x, view.tiles_y);
-    return footprint_in_tile(g, mode, r, static_cast<int>(tile % view.tiles_x), static_cast<int>(tile / view.tiles_x),
-                             view);
+    const int tx = static_cast<int>(tile % view.tiles_x), ty = static_cast<int>(tile / view.tiles_x);
+    if (tx < r.x0 || tx >= r.x1 || ty < r.y0 || ty >= r.y1) return false;
+    const TileSpan s = footprint_row(g, mode, r, ty, view, T(0), EllipseRows<T>(g, opacity_level(g.opacity)));
+    return tx >= s.x0 && tx < s.x1;
 }
 
 /// The tile predicate of count and emit. Calls emit(tile_id) for every tile in the union of
@@ -158,15 +237,34 @@ CATGS_HD std::uint32_t for_each_window_tile(const Projected<T>* poses, std::uint
     u.y1 = u.y1 < rows.end ? u.y1 : rows.end;
     if (u.empty()) return 0;
     std::uint32_t n = 0;
-    for (int ty = u.y0; ty < u.y1; ++ty)
-        for (int tx = u.x0; tx < u.x1; ++tx) {
+    if (window == 1) {  // the plain pipeline: one span per row, no union
+        const EllipseRows<T> ellipse(poses[0], opacity_level(poses[0].opacity));
+        for (int ty = u.y0; ty < u.y1; ++ty) {
+            const TileSpan s = footprint_row(poses[0], mode, rects[0], ty, view, guard, ellipse);
+            for (int tx = s.x0; tx < s.x1; ++tx) emit(static_cast<std::uint32_t>(ty * view.tiles_x + tx));
+            n += static_cast<std::uint32_t>(s.x1 - s.x0);
+        }
+        return n;
+    }
+    for (int ty = u.y0; ty < u.y1; ++ty) {
+        TileSpan spans[MaxWindow];
+        int x0 = u.x1, x1 = u.x0;
+        for (int k = 0; k < window; ++k) {
+            spans[k] = rects[k].empty() ? TileSpan{0, 0}
+                                        : footprint_row(poses[k], mode, rects[k], ty, view, guard,
+                                                        EllipseRows<T>(poses[k], opacity_level(poses[k].opacity)));
+            if (spans[k].x0 >= spans[k].x1) continue;
+            x0 = spans[k].x0 < x0 ? spans[k].x0 : x0;
+            x1 = spans[k].x1 > x1 ? spans[k].x1 : x1;
+        }
+        for (int tx = x0; tx < x1; ++tx) {
             bool hit = false;
-            for (int k = 0; k < window && !hit; ++k)
-                hit = footprint_in_tile(poses[k], mode, rects[k], tx, ty, view, guard);
+            for (int k = 0; k < window && !hit; ++k) hit = tx >= spans[k].x0 && tx < spans[k].x1;
             if (!hit) continue;
             emit(static_cast<std::uint32_t>(ty * view.tiles_x + tx));
             ++n;
         }
+    }
     return n;
 }
 
