@@ -9,6 +9,7 @@
 
 #include "catgs/cache.hpp"
 #include "catgs/cpu_renderer.hpp"
+#include "catgs/split_choice.hpp"
 #include "test_util.hpp"
 
 namespace catgs {
@@ -137,6 +138,99 @@ TEST(CatgsSplit, AutomaticKFollowsTheListLengths) {
     EXPECT_GE(s.split_k, kAutoSplitFloor);
     EXPECT_GE(s.split_k, static_cast<std::uint32_t>(kAutoSplitFactor * mean));
     EXPECT_LE(s.split_k, static_cast<std::uint32_t>(kAutoSplitFactor * mean) + kAutoSplitFloor);
+}
+
+// --- Choosing per path whether to split (SplitChooser) ----------------------------------
+
+FrameStats measured(double rasterize_ms, double merge_ms, std::uint64_t pairs) {
+    FrameStats s;
+    s.pairs = pairs;
+    s.stage_ms[Stage::rasterize] = rasterize_ms;
+    s.stage_ms[Stage::merge] = merge_ms;
+    return s;
+}
+
+CatgsOptions timed_split_options() {
+    CatgsOptions o;
+    o.split_k = 8192;
+    o.window_cost = WindowCost::time;
+    return o;
+}
+
+/// Runs `frames` list-building frames where a split frame costs `split_ms` and a whole one
+/// `whole_ms` per million pairs (merge included); returns how many split.
+int split_frames(SplitChooser& chooser, const CatgsOptions& o, int frames, double split_ms, double whole_ms) {
+    int split = 0;
+    for (int i = 0; i < frames; ++i) {
+        const bool s = chooser.choose(o);
+        split += s;
+        chooser.learn(s, s ? measured(split_ms * 0.9, split_ms * 0.1, 1000000) : measured(whole_ms, 0, 1000000));
+    }
+    return split;
+}
+
+// Split first, whole second, then the cheaper side on all but one frame in kSplitProbeEvery,
+// following the costs when they change sides; the merge counts against splitting.
+TEST(SplitChooser, TakesTheSideWithTheLowerMeasuredRasterizeCostAndProbesTheOther) {
+    const CatgsOptions o = timed_split_options();
+    SplitChooser chooser;
+    EXPECT_TRUE(chooser.choose(o));
+    chooser.learn(true, measured(2.7, 0.3, 1000000));  // 3.0 ms per million pairs
+    EXPECT_FALSE(chooser.choose(o));
+    chooser.learn(false, measured(2.0, 0, 1000000));
+    EXPECT_NEAR(chooser.split_cost().value(), 3.0, 1e-12);
+    EXPECT_NEAR(chooser.whole_cost().value(), 2.0, 1e-12);
+    const int frames = 20 * kSplitProbeEvery;
+    EXPECT_EQ(split_frames(chooser, o, frames, 3.0, 2.0), frames / kSplitProbeEvery);  // whole wins; probes split
+    // The content changes: splitting pays now (a 1080p garden), and the probes find it.
+    const int split = split_frames(chooser, o, frames, 1.0, 2.0);
+    EXPECT_GE(split, frames - frames / kSplitProbeEvery - 2 * kSplitProbeEvery);
+    EXPECT_LE(split, frames - frames / kSplitProbeEvery);
+    // Per pair: a frame with twice the pairs and twice the time costs the same.
+    SplitChooser per_pair;
+    per_pair.choose(o);
+    per_pair.learn(true, measured(4.0, 0, 2000000));
+    per_pair.choose(o);
+    per_pair.learn(false, measured(2.5, 0, 1000000));
+    EXPECT_TRUE(per_pair.choose(o));
+}
+
+// Without timings in the plan (window_cost work or off) every frame splits as the options say,
+// so the frames do not depend on the machine; with nothing to split, nothing splits.
+TEST(SplitChooser, SplitsAsTheOptionsSayWithoutTimingsAndNeverWithoutK) {
+    for (WindowCost cost : {WindowCost::work, WindowCost::off}) {
+        CatgsOptions o = timed_split_options();
+        o.window_cost = cost;
+        SplitChooser chooser;
+        EXPECT_EQ(split_frames(chooser, o, 40, 5.0, 1.0), 40) << window_cost_name(cost);
+    }
+    CatgsOptions none = timed_split_options();
+    none.split_k = 0;
+    SplitChooser chooser;
+    EXPECT_EQ(split_frames(chooser, none, 10, 1.0, 5.0), 0);
+}
+
+// On the CPU backend, through the planner: a frame the chooser keeps whole has no extra
+// tasks where the same frame split has, and draws the image splitting draws (within one 8-bit
+// level: CatgsSplit.SplittingDoesNotChangeTheImage says why).
+TEST(SplitChooser, AFrameKeptWholeByThePlannerHasNoSubtasks) {
+    const Scene scene = dense_scene("split chooser frames");
+    const Camera cam = test::forward_camera(96, 64, 60.0);
+    RenderOptions o;
+    o.catgs.split_k = 32;
+    o.catgs.window_cost = WindowCost::time;  // cache off: every frame is a plain key frame
+    CpuRenderer<float> renderer(1);
+    ImageF first, second;
+    const FrameStats a = renderer.render(scene, cam, o, first);
+    const FrameStats b = renderer.render(scene, cam, o, second);
+    EXPECT_GT(a.split_tasks, 0u);  // unmeasured: split first
+    EXPECT_EQ(b.split_tasks, 0u);  // then whole, to measure it
+    EXPECT_EQ(b.split_k, 0u);
+    const ImageError e = compare(to_rgb8(first), to_rgb8(second));
+    EXPECT_LE(e.max_abs, 1);
+    EXPECT_GE(e.psnr, 60.0);
+    EXPECT_TRUE(renderer.planner().split_chooser().split_cost().known());
+    EXPECT_TRUE(renderer.planner().split_chooser().whole_cost().known());
 }
 
 }  // namespace

@@ -196,7 +196,7 @@ Frame<T> CudaRenderer<T>::Impl::plan_frame(const Camera& camera, const RenderOpt
     f.pixels = static_cast<std::size_t>(f.view.width) * f.view.height;
     f.tile_bits = sort_key_tile_bits(f.tiles);
     f.shared_list = options.culling == Culling::exact;
-    f.splitting = catgs.split_auto || catgs.split_k > 0;
+    f.splitting = (catgs.split_auto || catgs.split_k > 0) && f.plan.split;
     f.speculative = f.cache == CacheMode::speculative;
     f.near = f.plan.window_near_plane(catgs, options.near_plane);
     f.reproject_actual = f.near != options.near_plane;

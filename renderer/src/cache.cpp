@@ -134,6 +134,17 @@ std::vector<Camera> predict_poses(const std::deque<Camera>& history, int count) 
 }
 
 FramePlanner::Plan FramePlanner::next(const Camera& actual, const CatgsOptions& options, const FrameHints* hints) {
+    Plan plan = plan_frame(actual, options, hints);
+    if (!split_intrinsics_ || !same_intrinsics(*split_intrinsics_, actual.intrinsics)) {
+        split_.reset();
+        split_intrinsics_ = actual.intrinsics;
+    }
+    if (plan.key || plan.resort) plan.split = split_.choose(options);
+    return plan;
+}
+
+FramePlanner::Plan FramePlanner::plan_frame(const Camera& actual, const CatgsOptions& options,
+                                            const FrameHints* hints) {
     history_.push_back(actual);
     while (history_.size() > kHistoryLength) history_.pop_front();
     Plan plan;
@@ -254,6 +265,7 @@ void FramePlanner::key_rendered(const Plan& plan, const KeyFrameSummary& summary
 }
 
 void FramePlanner::frame_rendered(const Plan& plan, const FrameStats& stats) {
+    if (plan.key || plan.resort) split_.learn(plan.split, stats);
     if (cost_feed_ == WindowCost::off) return;
     const double cost = frame_cost(stats, cost_feed_);
     if (!(cost > 0) || !std::isfinite(cost)) return;
@@ -276,6 +288,8 @@ void FramePlanner::invalidate() {
 
 void FramePlanner::reset() {
     costs_.reset();
+    split_.reset();
+    split_intrinsics_.reset();
     cost_intrinsics_.reset();
     window_end_reported_ = true;
     history_.clear();

@@ -126,7 +126,7 @@ FrameStats CpuRenderer<T>::render_frame(const Scene& scene, const Camera& camera
             emitted_values_.clear();
         }
         stats.stage_ms[Stage::keys] = elapsed_ms(t);
-        sort_and_schedule(view, options, stats);
+        sort_and_schedule(view, options, plan.split, stats);
         if (frame_cache != CacheMode::off)
             planner_.key_rendered(plan, summarize(scene, window, options.culling));
         else
@@ -138,7 +138,7 @@ FrameStats CpuRenderer<T>::render_frame(const Scene& scene, const Camera& camera
             t = Clock::now();
             rekey(view, options.culling);
             stats.stage_ms[Stage::keys] = elapsed_ms(t);
-            sort_and_schedule(view, options, stats);
+            sort_and_schedule(view, options, plan.split, stats);
         }
     }
     t = Clock::now();
@@ -163,7 +163,8 @@ FrameStats CpuRenderer<T>::render_frame(const Scene& scene, const Camera& camera
 // Sort, tile ranges and the task list, timed: what key frames and re-sorting cached frames
 // run after their keys are in place.
 template <typename T>
-void CpuRenderer<T>::sort_and_schedule(const View<T>& view, const RenderOptions& options, FrameStats& stats) {
+void CpuRenderer<T>::sort_and_schedule(const View<T>& view, const RenderOptions& options, bool may_split,
+                                       FrameStats& stats) {
     auto t = Clock::now();
     sort(view);
     stats.stage_ms[Stage::sort] = elapsed_ms(t);
@@ -171,7 +172,12 @@ void CpuRenderer<T>::sort_and_schedule(const View<T>& view, const RenderOptions&
     ranges(view, options.culling);
     stats.stage_ms[Stage::ranges] = elapsed_ms(t);
     t = Clock::now();
-    split_k_ = split(options.catgs);
+    CatgsOptions split_options = options.catgs;
+    if (!may_split) {  // the planner measured that splitting does not pay here (SplitChooser)
+        split_options.split_k = 0;
+        split_options.split_auto = false;
+    }
+    split_k_ = split(split_options);
     stats.stage_ms[Stage::split] = elapsed_ms(t);
 }
 

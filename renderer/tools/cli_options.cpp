@@ -65,7 +65,10 @@ std::string readable_degrees(const std::string& flag_value) {
 
 void add_pipeline_flags(CLI::App& app, PipelineFlags& f) {
     app.add_option("--culling", f.culling, "exact, bbox3sigma or opacity-aware")->capture_default_str();
-    app.add_option("--split", f.split, "tile task splitting: off, auto, or k (lists longer than k are split)")
+    app.add_option(
+           "--split", f.split,
+           "tile task splitting: off, auto, or k (lists longer than k are split; with --window-cost time, only on "
+           "paths where splitting measures faster)")
         ->capture_default_str();
     app.add_option("--split-tail", f.split_tail,
                    "early-termination transmittance of split sub-tasks after the first (1e-4 = exact)")

@@ -24,6 +24,7 @@
 
 #include "catgs/camera.hpp"
 #include "catgs/constants.hpp"
+#include "catgs/split_choice.hpp"
 #include "catgs/window_cost.hpp"
 
 namespace catgs {
@@ -145,6 +146,10 @@ public:
         /// a cached frame of its window may re-sort, and re-sorting re-keys from them so that
         /// the stable sort orders equal depths by index, as a full render does.
         bool keep_emission_order = false;
+        /// A frame that builds task lists (a key frame, or a cached frame that re-sorts) may
+        /// split its long tiles: off where the measured rasterize time says splitting does not
+        /// pay on this path (SplitChooser), or where the options split nothing.
+        bool split = true;
 
         /// The cache mode this frame renders with.
         CacheMode cache(const CatgsOptions& options) const { return plain ? CacheMode::off : options.cache; }
@@ -170,8 +175,11 @@ public:
     void reset();
     /// What the cost model has learned (tests and tools read it).
     const WindowCostModel& cost_model() const { return costs_; }
+    const SplitChooser& split_chooser() const { return split_; }
 
 private:
+    /// next() without the split choice.
+    Plan plan_frame(const Camera& actual, const CatgsOptions& options, const FrameHints* hints);
     /// Radians the camera turns per frame: the reported angular speed, else the last step.
     double expected_turn_per_frame(const FrameHints* hints) const;
     /// W from the expected screen motion (the adaptive window), or the fixed W.
@@ -193,6 +201,9 @@ private:
     WindowCostModel costs_;
     WindowCost cost_feed_ = WindowCost::off;
     std::optional<Intrinsics> cost_intrinsics_;
+    SplitChooser split_;
+    // Split costs per pair measured at other intrinsics say little about these.
+    std::optional<Intrinsics> split_intrinsics_;
     // The current window's length has been reported to the cost model.
     bool window_end_reported_ = true;
 };

@@ -62,6 +62,8 @@ public:
     const std::vector<std::uint32_t>& sorted_values() const { return values_; }
     const std::vector<TileRange>& tile_ranges() const { return ranges_; }
     const std::vector<TileTask>& tasks() const { return tasks_; }
+    /// The frame planner: what its cost models have learned.
+    const FramePlanner& planner() const { return planner_; }
     /// Test-only: the (R, A) that sub-task `index` of split tile `tile` left at the tile's
     /// kTileSize x kTileSize pixels (row-major within the tile; pixels past the image edge are
     /// unspecified), before merge. nullptr when the tile was not split or index is past its
@@ -90,7 +92,7 @@ private:
     void sort(const View<T>& view);
     void ranges(const View<T>& view, Culling culling);
     std::uint32_t split(const CatgsOptions& options);
-    void sort_and_schedule(const View<T>& view, const RenderOptions& options, FrameStats& stats);
+    void sort_and_schedule(const View<T>& view, const RenderOptions& options, bool may_split, FrameStats& stats);
     void rasterize(const View<T>& view, const RenderOptions& options, const FrameOutput& out);
     void merge(const View<T>& view, const RenderOptions& options, const FrameOutput& out);
     KeyFrameSummary summarize(const Scene& scene, const Window& window, Culling culling) const;

@@ -1,0 +1,29 @@
+#include "catgs/split_choice.hpp"
+
+#include "catgs/render_options.hpp"
+#include "catgs/stage.hpp"
+
+namespace catgs {
+
+bool SplitChooser::choose(const CatgsOptions& options) {
+    if (!options.split_auto && options.split_k == 0) return false;
+    measured_ = options.window_cost == WindowCost::time;
+    probing_ = false;
+    if (!measured_) return true;
+    const std::uint64_t n = decisions_++;
+    if (!split_.known()) return true;
+    if (!whole_.known()) return false;
+    const bool split_cheaper = split_.value() <= whole_.value();
+    probing_ = n % kSplitProbeEvery == kSplitProbeEvery - 1;
+    return split_cheaper != probing_;
+}
+
+void SplitChooser::learn(bool split, const FrameStats& stats) {
+    if (!measured_ || stats.pairs == 0) return;
+    const double ms = stats.stage_ms[Stage::rasterize] + stats.stage_ms[Stage::merge];
+    if (!(ms > 0)) return;
+    (split ? split_ : whole_)
+        .add(ms * 1e6 / static_cast<double>(stats.pairs), decisions_, probing_ ? kSplitProbeWeight : kSplitCostWeight);
+}
+
+}  // namespace catgs
