@@ -169,8 +169,9 @@ int split_frames(SplitChooser& chooser, const CatgsOptions& o, int frames, doubl
     return split;
 }
 
-// Split first, whole second, then the cheaper side on all but one frame in kSplitProbeEvery,
-// following the costs when they change sides; the merge counts against splitting.
+// Split first, whole second, then the cheaper side on all but one frame in kSplitProbeEvery
+// (kSplitClearProbeEvery once the other side is clearly dearer), following the costs when they
+// change sides; the merge counts against splitting.
 TEST(SplitChooser, TakesTheSideWithTheLowerMeasuredRasterizeCostAndProbesTheOther) {
     const CatgsOptions o = timed_split_options();
     SplitChooser chooser;
@@ -180,12 +181,17 @@ TEST(SplitChooser, TakesTheSideWithTheLowerMeasuredRasterizeCostAndProbesTheOthe
     chooser.learn(false, measured(2.0, 0, 1000000));
     EXPECT_NEAR(chooser.split_cost().value(), 3.0, 1e-12);
     EXPECT_NEAR(chooser.whole_cost().value(), 2.0, 1e-12);
-    const int frames = 20 * kSplitProbeEvery;
-    EXPECT_EQ(split_frames(chooser, o, frames, 3.0, 2.0), frames / kSplitProbeEvery);  // whole wins; probes split
-    // The content changes: splitting pays now (a 1080p garden), and the probes find it.
+    const int frames = 20 * kSplitClearProbeEvery;
+    // Whole wins by 50%: after the two first frames, one probe in kSplitClearProbeEvery splits.
+    EXPECT_EQ(split_frames(chooser, o, frames, 3.0, 2.0), frames / kSplitClearProbeEvery);
+    // Whole wins by 10%: one in kSplitProbeEvery.
+    SplitChooser close;
+    EXPECT_EQ(split_frames(close, o, frames + 2, 2.2, 2.0), 1 + frames / kSplitProbeEvery);
+    // The content changes: splitting pays now (a 1080p garden); the next probe finds it, and
+    // from then on whole frames are the probes.
     const int split = split_frames(chooser, o, frames, 1.0, 2.0);
-    EXPECT_GE(split, frames - frames / kSplitProbeEvery - 2 * kSplitProbeEvery);
-    EXPECT_LE(split, frames - frames / kSplitProbeEvery);
+    EXPECT_GE(split, frames - kSplitClearProbeEvery - frames / kSplitProbeEvery);
+    EXPECT_LE(split, frames - frames / kSplitClearProbeEvery + 1);
     // Per pair: a frame with twice the pairs and twice the time costs the same.
     SplitChooser per_pair;
     per_pair.choose(o);

@@ -10,11 +10,15 @@ bool SplitChooser::choose(const CatgsOptions& options) {
     measured_ = options.window_cost == WindowCost::time;
     probing_ = false;
     if (!measured_) return true;
-    const std::uint64_t n = decisions_++;
+    ++decisions_;
     if (!split_.known()) return true;
     if (!whole_.known()) return false;
     const bool split_cheaper = split_.value() <= whole_.value();
-    probing_ = n % kSplitProbeEvery == kSplitProbeEvery - 1;
+    const double loser = split_cheaper ? whole_.value() : split_.value();
+    const double winner = split_cheaper ? split_.value() : whole_.value();
+    const int every = loser > kSplitClearMargin * winner ? kSplitClearProbeEvery : kSplitProbeEvery;
+    probing_ = ++since_probe_ >= every;
+    if (probing_) since_probe_ = 0;
     return split_cheaper != probing_;
 }
 

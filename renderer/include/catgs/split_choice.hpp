@@ -13,7 +13,10 @@
 // dense and sparse frames. A frame that builds task lists (a key frame, or a cached frame that
 // re-sorts) splits while split is the cheaper side, or while either side is unmeasured (split
 // first: it is what the options ask for). Every kSplitProbeEvery-th such frame renders the other
-// side to keep its estimate fresh, which costs at most that share of the difference; a probe
+// side to keep its estimate fresh, which costs at most that share of the difference, and only
+// every kSplitClearProbeEvery-th once the other side costs kSplitClearMargin more: on the kit's
+// 4K paths the split probes were 1% of the path at one in 16, the larger half of what the
+// defaults cost over plain frames there (H200, 2026-12-02). A probe
 // moves its side's estimate more than an ordinary frame (kSplitProbeWeight), since that
 // estimate has not been fed for a while.
 // Only with CatgsOptions::window_cost = time: with work or off the frames must not depend on
@@ -29,8 +32,11 @@ namespace catgs {
 struct CatgsOptions;
 struct FrameStats;
 
-/// One frame in this many that build task lists renders the side not chosen.
+/// One frame in this many that build task lists renders the side not chosen...
 inline constexpr int kSplitProbeEvery = 16;
+/// ... and one in this many while the side not chosen costs this much more per pair.
+inline constexpr int kSplitClearProbeEvery = 64;
+inline constexpr double kSplitClearMargin = 1.25;
 /// How much one frame moves a side's estimate.
 inline constexpr double kSplitCostWeight = 0.25;
 /// How much a probe moves the estimate of the side not chosen: that estimate is up to
@@ -53,6 +59,7 @@ public:
 private:
     CostEstimate split_, whole_;
     std::uint64_t decisions_ = 0;
+    int since_probe_ = 0;    // measured choices since the last probe
     bool measured_ = false;  // the last choice came from timings (window_cost = time)
     bool probing_ = false;   // the last choice was a probe
 };
