@@ -16,10 +16,11 @@ namespace {
 // a window, so the last two count and a change of content is followed within a few windows.
 constexpr double kFrameWeight = 0.2;
 constexpr double kWindowWeight = 0.5;
-// With nothing known, the first window has at most this W (the paper's W, the controller's
-// start): a window that cannot pay must not cost much to find out, and key(W) for larger W is
-// then extrapolated from it and plain.
-constexpr int kLearningWindow = 4;
+// With nothing known, the first window has at most this W: a window that cannot pay must not
+// cost much to find out, and key(W) for larger W is then extrapolated from it and plain. At 4 it
+// was the slowest frame of every kit path (2-2.3x a plain frame, H200, 2026-12-02); a key frame
+// of 2 poses costs 1.2-1.5x.
+constexpr int kLearningWindow = 2;
 // A sample above this many times the estimate counts as this much: one stall (an allocation,
 // another process on the GPU) must not turn the model off windows or plain frames for long.
 constexpr double kSpikeClip = 3.0;
@@ -224,22 +225,35 @@ WindowCostModel::Choice WindowCostModel::choose(int max_window) {
     for (int w = 2; w <= kMaxWindow; ++w) any_key = any_key || key_[w].known();
     if (!any_key) return {std::min(most, kLearningWindow), false};
     double cheapest = std::numeric_limits<double>::infinity();
-    for (int w = 2; w <= most; ++w) cheapest = std::min(cheapest, expected_frame_cost(w).value_or(cheapest));
+    for (int w = 2; w <= most; ++w)
+        if (key_within_tail(w)) cheapest = std::min(cheapest, expected_frame_cost(w).value_or(cheapest));
     // Among the windows within kWindowTieMargin of the cheapest, the smallest: its key frame is
     // the smallest spike in the frame times, and it wastes the least when cut short.
     int best = 2;
     double best_cost = cheapest;
     for (int w = 2; w <= most; ++w) {
         const std::optional<double> e = expected_frame_cost(w);
-        if (e && *e <= cheapest * (1 + kWindowTieMargin)) {
+        if (e && key_within_tail(w) && *e <= cheapest * (1 + kWindowTieMargin)) {
             best = w;
             best_cost = *e;
             break;
         }
     }
-    const bool windows_pay = best_cost < (1 - kWindowPayMargin) * plain_.value();
+    const bool windows_pay = std::isfinite(cheapest) && best_cost < (1 - kWindowPayMargin) * plain_.value();
     if (const std::optional<Choice> p = probe(best, windows_pay, most)) return *p;
     return {windows_pay ? best : 1, false};
+}
+
+bool WindowCostModel::key_within_tail(int window) const {
+    const std::optional<double> key = key_cost(window);
+    const std::optional<double> plain = plain_cost();
+    if (!key || !plain || *key <= kMaxKeyFrameCost * *plain) return true;
+    // Past the bound, estimates get no new samples: once the newest is kStaleKeyFrames old, the
+    // smallest window may be probed again, or a stretch where windows became cheap is never found.
+    std::uint64_t newest = 0;
+    for (int w = 2; w <= kMaxWindow; ++w)
+        if (key_[w].known()) newest = std::max(newest, key_[w].last_frame());
+    return window == 2 && frame_ >= newest + kStaleKeyFrames;
 }
 
 // The probe due now, if the spacing and the budget allow it (the header's rule).
@@ -252,18 +266,21 @@ std::optional<WindowCostModel::Choice> WindowCostModel::probe(int best, bool win
     if (!windows_pay) {
         // The window that risks the least: a wrong estimate then costs the least to correct.
         loss = std::numeric_limits<double>::infinity();
+        c.window = 0;
         for (int w = 2; w <= max_window; ++w) {
+            if (!key_within_tail(w)) continue;
             const double risk = served(w) * (expected_frame_cost(w).value_or(plain) - plain);
             if (risk < loss) {
                 loss = risk;
                 c.window = w;
             }
         }
+        if (c.window == 0) return std::nullopt;  // every window's key frame would set the tail
     } else {
         // The neighbour whose key cost is the stalest (never measured first).
         int neighbour = 0;
         for (int w : {best - 1, best + 1}) {
-            if (w < 2 || w > max_window) continue;
+            if (w < 2 || w > max_window || !key_within_tail(w)) continue;
             if (neighbour == 0 || !key_[w].known() ||
                 (key_[neighbour].known() && key_[w].last_frame() < key_[neighbour].last_frame()))
                 neighbour = w;

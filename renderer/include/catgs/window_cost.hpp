@@ -7,7 +7,8 @@
 //     e(W) = (key(W) + (served(W) - 1) * cached(W)) / served(W),
 // against plain, the cost of a plain frame (no speculation, guard band or kept pairs). At a
 // key frame the planner takes the W in 2..M with the lowest e(W) (the smallest W of those
-// within kWindowTieMargin of it), where M is the motion-adaptive window (WindowController:
+// within kWindowTieMargin of it) among those whose key frame costs at most kMaxKeyFrameCost plain
+// frames, where M is the motion-adaptive window (WindowController:
 // frames past the envelope become key frames anyway, so a larger W cannot serve more), and
 // opens it only if e(W) < (1 - kWindowPayMargin) * plain; otherwise the frame is plain. Every estimate is learned from
 // what the backend measured for each frame (FrameStats::total_ms, or the work counts of frame_work) through
@@ -19,7 +20,7 @@
 // between the measured W (and plain as W = 1), extrapolated past the largest by the last slope; cached(W) from the
 // nearest measured W (none: plain, since frames never drawn from the cache cannot be assumed to save); served(W) = W
 // unless a smaller window ended early, which bounds it. With nothing known the first frame is plain (it has no motion
-// to speculate on either) and the first window takes the motion-adaptive W up to 4, so both sides are measured before
+// to speculate on either) and the first window takes the motion-adaptive W up to 2, so both sides are measured before
 // the model decides and finding out that windows cannot pay costs little.
 //
 // Probing, deterministic and bounded. Estimates of the side not chosen go stale (the scene or
@@ -90,6 +91,14 @@ inline constexpr double kWindowPayMargin = 0.02;
 /// key frame sets the frame-time tail (p90, max) and a window cut short (a turn, the end of a
 /// stream) wastes most of it.
 inline constexpr double kWindowTieMargin = 0.02;
+/// Windows whose key frame is expected to cost more than this many plain frames are neither
+/// opened nor probed, even where they would pay over the window: their key frames set the tail
+/// of the frame times (the kit's city at 1080p: W = 4 key frames at 2.3x plain were its slowest
+/// frames, for 0.5% saved over the path; H200, 2026-12-02). A viewer sees the slowest frames.
+inline constexpr double kMaxKeyFrameCost = 1.5;
+/// ... except that W = 2 may be probed once the newest key sample is this many frames old, so
+/// that a stretch where key frames became cheap is found: at most one such frame per this many.
+inline constexpr std::uint64_t kStaleKeyFrames = 200;
 /// The share of every frame's cost set aside for probes: probes cost at most about this much of
 /// a path (the issue allows the default 2% over plain; the first window can cost another frame).
 inline constexpr double kProbeShare = 0.01;
@@ -136,6 +145,8 @@ private:
     /// Adds a sample to estimates[w] and scales the other W's estimates alike.
     void learn(std::array<CostEstimate, kMaxWindow + 1>& estimates, int window, double cost);
     std::optional<Choice> probe(int best, bool windows_pay, int max_window);
+    /// key(W) within kMaxKeyFrameCost of plain (or unknown).
+    bool key_within_tail(int window) const;
     /// A probe's window has ended: the budget pays what it really lost beyond the estimate.
     void settle_probe();
 
