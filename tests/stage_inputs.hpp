@@ -18,6 +18,7 @@
 #include "catgs/stages/blend.hpp"
 #include "catgs/stages/project.hpp"
 #include "catgs/stages/split.hpp"
+#include "catgs/stages/view.hpp"
 
 namespace catgs::test::stage {
 
@@ -102,6 +103,17 @@ Projected<T> random_projected(std::mt19937_64& rng, int width, int height) {
     p.key_depth = static_cast<float>(p.depth);
     p.colour = {T(0), T(0), T(0)};
     return p;
+}
+
+/// The image and tile grid of a view, all the tile stage reads of it (the pose is left zero).
+template <typename T>
+View<T> image_view(int width, int height) {
+    View<T> view{};
+    view.width = width;
+    view.height = height;
+    view.tiles_x = tiles_for(width);
+    view.tiles_y = tiles_for(height);
+    return view;
 }
 
 /// The same projected Gaussian in double: what the double pipeline would get from the float one.

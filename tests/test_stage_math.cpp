@@ -135,12 +135,12 @@ TEST(StageProject, DoubleGeometryIsTheEwaCovarianceAndThePinholeMean) {
 // (measured 6.7e-6). The conic, whose entries are at most 1 / blur, absolutely (measured
 // 5.7e-4): q = d^T conic d at an offset d is then off by less than |d|^2 times that, within
 // the bound of StressBugs.FloatProjectsNearlyRankOneCovariances (1e-3 |d|^2 / blur). Float
-// culls where double does, except within rounding of the near plane (none seen).
+// culls where double does, except within rounding of the near plane (about one seed in 40).
 TEST(StageProject, FloatGeometryMatchesDoubleWithinMeasuredTolerance) {
     const std::uint64_t seed = test::fresh_seed("stage project float");
     std::mt19937_64 rng(seed);
     double worst_mean = 0, worst_cov = 0, worst_conic = 0;
-    int compared = 0;
+    int compared = 0, near_plane_band = 0;
     for (int trial = 0; trial < 40; ++trial) {
         const Camera camera = camera_near_origin(rng);
         const View<double> vd = make_view<double>(camera, {0, 0, 0});
@@ -152,12 +152,20 @@ TEST(StageProject, FloatGeometryMatchesDoubleWithinMeasuredTolerance) {
             Projected<double> pd;
             Projected<float> pf;
             const bool d = project_geometry(g.ref(i), vd, pd), f = project_geometry(g.ref(i), vf, pf);
-            ASSERT_EQ(f, d) << "gaussian " << i << " at depth " << pd.depth << " (CATGS_TEST_SEED=" << seed << ")";
-            if (!d) continue;
-            ++compared;
             const double p =
                 std::sqrt(g.positions[3 * i] * g.positions[3 * i] + g.positions[3 * i + 1] * g.positions[3 * i + 1] +
                           g.positions[3 * i + 2] * g.positions[3 * i + 2]);
+            // Within float's rounding of the depth (pc = R p + t, eps (|p| + |t|) a term, three
+            // terms) of the near plane either answer is right: seen once in ~40 fresh seeds, a
+            // Gaussian at depth 0.2000000107 against the plane at 0.2.
+            const double depth_rounding = 3 * std::numeric_limits<float>::epsilon() * (1 + p + eye);
+            if (std::fabs(pd.depth - vd.near_plane) <= depth_rounding) {
+                ++near_plane_band;
+                continue;
+            }
+            ASSERT_EQ(f, d) << "gaussian " << i << " at depth " << pd.depth << " (CATGS_TEST_SEED=" << seed << ")";
+            if (!d) continue;
+            ++compared;
             // pc = R p + t rounds by eps (|p| + |t|), and the mean divides it by the depth.
             const double off_axis = std::fabs(pd.mean.x - vd.cx) + std::fabs(pd.mean.y - vd.cy);
             const double mean_scale = (std::max(vd.fx, vd.fy) + off_axis) * (1 + p + eye) / pd.depth +
@@ -183,7 +191,8 @@ TEST(StageProject, FloatGeometryMatchesDoubleWithinMeasuredTolerance) {
         }
     }
     std::cout << "[stage] project float vs double over " << compared << ": mean " << worst_mean << ", cov " << worst_cov
-              << " (relative), conic " << worst_conic << " (absolute)" << std::endl;
+              << " (relative), conic " << worst_conic << " (absolute); " << near_plane_band
+              << " within rounding of the near plane" << std::endl;
     EXPECT_GT(compared, 10000);
 }
 
@@ -375,11 +384,7 @@ TEST(StageTiles, EllipseTouchesTileWhereTheEllipseReachesTheTilesPixelCentres) {
 template <typename T>
 int check_row_spans(const std::vector<Projected<T>>& poses, int width, int height, double guard, double band,
                     int& touched, const std::string& where) {
-    View<T> view{};
-    view.width = width;
-    view.height = height;
-    view.tiles_x = tiles_for(width);
-    view.tiles_y = tiles_for(height);
+    const View<T> view = stage::image_view<T>(width, height);
     std::vector<int> emitted(static_cast<std::size_t>(view.tiles_x * view.tiles_y), 0);
     Projected<T> window[kMaxWindow];
     std::copy(poses.begin(), poses.end(), window);

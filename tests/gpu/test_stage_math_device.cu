@@ -298,11 +298,9 @@ TEST_F(StageDevice, RowSpanTilesAreTheHosts) {
     std::mt19937_64 rng(seed);
     std::uint64_t touched = 0;
     for (int trial = 0; trial < 10; ++trial) {
-        View<float> view{};
-        view.width = static_cast<int>(stage::uniform(rng, 17, 900));
-        view.height = static_cast<int>(stage::uniform(rng, 17, 600));
-        view.tiles_x = tiles_for(view.width);
-        view.tiles_y = tiles_for(view.height);
+        const int width = static_cast<int>(stage::uniform(rng, 17, 900)),
+                  height = static_cast<int>(stage::uniform(rng, 17, 600));
+        const View<float> view = stage::image_view<float>(width, height);
         const std::vector<Projected<float>> g = agreeing_projected(rng, 5000, view.width, view.height);
         std::vector<float> guard;
         for (std::size_t i = 0; i < g.size(); ++i)
