@@ -31,14 +31,15 @@ CATGS_INLINE T min_visible_power(T opacity) {
     return log_of(static_cast<T>(kMinAlpha) / opacity);
 }
 
-/// blend_gaussian with the power already computed.
-template <typename T>
-CATGS_HD bool blend_power(PixelAccumulator<T>& acc, T power, T opacity, Vec3<T> colour,
-                          T min_transmittance = static_cast<T>(kMinTransmittance)) {
+/// blend_gaussian with the power already computed, and alpha's exponential taken by `exp_fn`
+/// (the CUDA float rasterizer passes the hardware's, see rasterize.cu).
+template <typename T, typename ExpFn>
+CATGS_HD bool blend_power_with(PixelAccumulator<T>& acc, T power, T opacity, Vec3<T> colour, T min_transmittance,
+                               ExpFn exp_fn) {
     // Written so that NaN fails both tests: far off-screen means can make the quadratic form
     // inf - inf, and min(0.99, NaN) would otherwise draw a NaN alpha as 0.99.
     if (!(power <= T(0))) return false;
-    T alpha = opacity * exp_of(power);
+    T alpha = opacity * exp_fn(power);
     if (!(alpha >= static_cast<T>(kMinAlpha))) return false;
     alpha = alpha < static_cast<T>(kMaxAlpha) ? alpha : static_cast<T>(kMaxAlpha);
     const T next = acc.transmittance * (T(1) - alpha);
@@ -50,6 +51,13 @@ CATGS_HD bool blend_power(PixelAccumulator<T>& acc, T power, T opacity, Vec3<T> 
     acc.colour = {acc.colour.x + colour.x * weight, acc.colour.y + colour.y * weight, acc.colour.z + colour.z * weight};
     acc.transmittance = next;
     return false;
+}
+
+/// blend_gaussian with the power already computed.
+template <typename T>
+CATGS_HD bool blend_power(PixelAccumulator<T>& acc, T power, T opacity, Vec3<T> colour,
+                          T min_transmittance = static_cast<T>(kMinTransmittance)) {
+    return blend_power_with(acc, power, opacity, colour, min_transmittance, [](T v) { return exp_of(v); });
 }
 
 /// Blends one Gaussian into a pixel sampled at (px, py). Sets acc.done (and blends nothing)
