@@ -201,6 +201,43 @@ TEST(SplitChooser, TakesTheSideWithTheLowerMeasuredRasterizeCostAndProbesTheOthe
     EXPECT_TRUE(per_pair.choose(o));
 }
 
+// A choice explores on its side's first frame and on probes, and only then; through the
+// planner, such a frame's cost is not learned by the window cost model: at 4K the first frame
+// splits and costs more than plain frames will, and learned as plain's cost it made losing
+// windows look cheap (the kit's garden low path, session 9).
+TEST(SplitChooser, ExploringFramesAreNotLearnedByTheWindowCostModel) {
+    const CatgsOptions o = timed_split_options();
+    SplitChooser chooser;
+    EXPECT_TRUE(chooser.choose(o));
+    EXPECT_TRUE(chooser.exploring());
+    chooser.learn(true, measured(3.0, 0, 1000000));
+    EXPECT_FALSE(chooser.choose(o));
+    EXPECT_TRUE(chooser.exploring());
+    chooser.learn(false, measured(2.0, 0, 1000000));
+    int explored = 0, probes = 0;
+    for (int i = 0; i < 4 * kSplitClearProbeEvery; ++i) {
+        const bool s = chooser.choose(o);
+        explored += chooser.exploring();
+        probes += s;  // whole wins: every split is a probe
+        chooser.learn(s, s ? measured(3.0, 0, 1000000) : measured(2.0, 0, 1000000));
+    }
+    EXPECT_EQ(explored, probes);
+    EXPECT_EQ(probes, 4);
+
+    const Scene scene = dense_scene("split exploring frames");
+    const Camera cam = test::forward_camera(96, 64, 60.0);
+    RenderOptions ro;
+    ro.catgs.split_k = 32;
+    ro.catgs.window_cost = WindowCost::time;
+    CpuRenderer<float> renderer(1);
+    ImageF image;
+    renderer.render(scene, cam, ro, image);  // split, first of its side
+    renderer.render(scene, cam, ro, image);  // whole, first of its side
+    EXPECT_FALSE(renderer.planner().cost_model().plain_cost().has_value());
+    renderer.render(scene, cam, ro, image);  // the cheaper side, learned
+    EXPECT_TRUE(renderer.planner().cost_model().plain_cost().has_value());
+}
+
 // Without timings in the plan (window_cost work or off) every frame splits as the options say,
 // so the frames do not depend on the machine; with nothing to split, nothing splits.
 TEST(SplitChooser, SplitsAsTheOptionsSayWithoutTimingsAndNeverWithoutK) {

@@ -139,7 +139,10 @@ FramePlanner::Plan FramePlanner::next(const Camera& actual, const CatgsOptions& 
         split_.reset();
         split_intrinsics_ = actual.intrinsics;
     }
-    if (plan.key || plan.resort) plan.split = split_.choose(options);
+    if (plan.key || plan.resort) {
+        plan.split = split_.choose(options);
+        plan.split_exploring = split_.exploring();
+    }
     return plan;
 }
 
@@ -266,7 +269,7 @@ void FramePlanner::key_rendered(const Plan& plan, const KeyFrameSummary& summary
 
 void FramePlanner::frame_rendered(const Plan& plan, const FrameStats& stats) {
     if (plan.key || plan.resort) split_.learn(plan.split, stats);
-    if (cost_feed_ == WindowCost::off) return;
+    if (cost_feed_ == WindowCost::off || plan.split_exploring) return;
     const double cost = frame_cost(stats, cost_feed_);
     if (!(cost > 0) || !std::isfinite(cost)) return;
     if (plan.plain)

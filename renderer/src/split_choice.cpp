@@ -8,16 +8,18 @@ namespace catgs {
 bool SplitChooser::choose(const CatgsOptions& options) {
     if (!options.split_auto && options.split_k == 0) return false;
     measured_ = options.window_cost == WindowCost::time;
-    probing_ = false;
+    probing_ = exploring_ = false;
     if (!measured_) return true;
     ++decisions_;
-    if (!split_.known()) return true;
-    if (!whole_.known()) return false;
+    if (!split_.known() || !whole_.known()) {
+        exploring_ = true;
+        return !split_.known();
+    }
     const bool split_cheaper = split_.value() <= whole_.value();
     const double loser = split_cheaper ? whole_.value() : split_.value();
     const double winner = split_cheaper ? split_.value() : whole_.value();
     const int every = loser > kSplitClearMargin * winner ? kSplitClearProbeEvery : kSplitProbeEvery;
-    probing_ = ++since_probe_ >= every;
+    probing_ = exploring_ = ++since_probe_ >= every;
     if (probing_) since_probe_ = 0;
     return split_cheaper != probing_;
 }

@@ -150,6 +150,11 @@ public:
         /// split its long tiles: off where the measured rasterize time says splitting does not
         /// pay on this path (SplitChooser), or where the options split nothing.
         bool split = true;
+        /// The split choice explores (SplitChooser::exploring): the window cost model does not
+        /// learn this frame's cost. At 4K the first frame splits and costs a third more than
+        /// the frames after it; learned as plain's cost, it kept the kit's garden low path on
+        /// windows that lost 18% for its first 66 frames (H200, session 9).
+        bool split_exploring = false;
 
         /// The cache mode this frame renders with.
         CacheMode cache(const CatgsOptions& options) const { return plain ? CacheMode::off : options.cache; }

@@ -51,6 +51,9 @@ public:
     /// What a frame that built its task lists with `split` measured.
     void learn(bool split, const FrameStats& stats);
     void reset() { *this = SplitChooser{}; }
+    /// The last choice explores: the first frame of its side, or a probe. Its frame costs what
+    /// the chooser would not have chosen, so the window cost model does not learn from it.
+    bool exploring() const { return exploring_; }
 
     /// Milliseconds of rasterize + merge per million pairs, per side (tests and tools).
     const CostEstimate& split_cost() const { return split_; }
@@ -59,9 +62,10 @@ public:
 private:
     CostEstimate split_, whole_;
     std::uint64_t decisions_ = 0;
-    int since_probe_ = 0;    // measured choices since the last probe
-    bool measured_ = false;  // the last choice came from timings (window_cost = time)
-    bool probing_ = false;   // the last choice was a probe
+    int since_probe_ = 0;     // measured choices since the last probe
+    bool measured_ = false;   // the last choice came from timings (window_cost = time)
+    bool probing_ = false;    // the last choice was a probe
+    bool exploring_ = false;  // the last choice was a probe or its side's first frame
 };
 
 }  // namespace catgs

@@ -21,7 +21,9 @@
 // nearest measured W (none: plain, since frames never drawn from the cache cannot be assumed to save); served(W) = W
 // unless a smaller window ended early, which bounds it. With nothing known the first frame is plain (it has no motion
 // to speculate on either) and the first window takes the motion-adaptive W up to 2, so both sides are measured before
-// the model decides and finding out that windows cannot pay costs little.
+// the model decides and finding out that windows cannot pay costs little. Frames on which the
+// split choice explores (SplitChooser::exploring) are not learned: their cost includes a choice
+// the planner would not make.
 //
 // Probing, deterministic and bounded. Estimates of the side not chosen go stale (the scene or
 // the motion changes), so the model sometimes renders the other side: where plain wins, the
