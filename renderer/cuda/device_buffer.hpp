@@ -2,8 +2,10 @@
 //
 // Policy: a buffer grows to max(requested, 1.5 x its capacity), rounded up to 1 MiB, and
 // never shrinks; so a stream of frames settles after a few frames and the steady state makes
-// no cudaMalloc. Memory is freed when the renderer is destroyed. Growth happens on the
-// renderer's stream after synchronising it, so no kernel still reads the old allocation.
+// no allocation. Memory is freed when the renderer is destroyed. Growth is stream-ordered
+// (cudaFreeAsync, cudaMallocAsync on the renderer's stream): the old allocation is freed after
+// the kernels queued before it, and, unlike cudaFree, nothing waits for the whole device, so a
+// session whose lists grow does not stall the server's other sessions on the same GPU.
 #pragma once
 
 #include <cuda_runtime_api.h>
@@ -31,15 +33,16 @@ public:
         std::size_t grown = static_cast<std::size_t>(static_cast<double>(capacity_) * kArenaGrowth);
         std::size_t target = bytes > grown ? bytes : grown;
         target = (target + kArenaGranularity - 1) / kArenaGranularity * kArenaGranularity;
-        CATGS_CUDA_CHECK(cudaStreamSynchronize(stream));
-        release();
-        CATGS_CUDA_CHECK(cudaMalloc(&data_, target));
+        if (data_) CATGS_CUDA_CHECK(cudaFreeAsync(data_, stream));
+        data_ = nullptr;
+        capacity_ = 0;
+        CATGS_CUDA_CHECK(cudaMallocAsync(&data_, target, stream));
         capacity_ = target;
         ++allocations_;
         return true;
     }
     void release() {
-        if (data_) cudaFree(data_);  // not checked: runs in destructors
+        if (data_) cudaFree(data_);  // not checked: runs in destructors; frees async allocations too
         data_ = nullptr;
         capacity_ = 0;
     }
