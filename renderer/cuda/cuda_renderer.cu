@@ -221,7 +221,6 @@ void CudaRenderer<T>::Impl::begin_frame(const Frame<T>& f, const HostOutputs& ou
     g.visible.reserve(max_slots + 1, s);
     g.touched.reserve(max_slots + 1, s);
     g.sort_depth.reserve(max_slots, s);
-    g.offsets.reserve(max_slots + 1, s);
     TileBuffers& t = buffers.tiles;
     t.range_begin.reserve(f.tiles, s);
     t.range_end.reserve(f.tiles, s);
@@ -281,7 +280,7 @@ void CudaRenderer<T>::Impl::preprocess(Frame<T>& f) {
 }
 
 /// The Gaussians in depth order (sort's first part) and the scan of their counts in that
-/// order; a frame over the pair budget is planned in bands instead, which emit in slot order.
+/// order; a frame over the pair budget is planned in bands instead, each emitted in that order.
 template <typename T>
 void CudaRenderer<T>::Impl::scan(Frame<T>& f) {
     f.total = order_by_depth(buffers.gaussians.sort_depth.data(), true);
@@ -316,7 +315,8 @@ std::uint64_t CudaRenderer<T>::Impl::count_band(const Frame<T>& f, TileRows rows
     cuda::count_band(CountBandArgs<T>{key_space, g.projected.data(), g.visible.data(), f.view, f.options->culling, rows,
                                       g.touched.data()},
                      stream);
-    const std::uint64_t pairs = scan_counts(key_space.slots);
+    cuda::rank_counts(buffers.depth, g.touched.data(), stream);
+    const std::uint64_t pairs = scan_ranked_counts(buffers.depth.ranked, true);
     events.record(Event::band_scan, stream);
     events.synchronize(Event::band_scan);
     events.add(Stage::scan, Event::band_count, Event::band_scan);
@@ -334,26 +334,25 @@ void CudaRenderer<T>::Impl::keys(const Frame<T>& f, TileRows rows, std::uint64_t
     p.current = 0;
     if (pairs > 0) {
         for (int k = 0; k < 2; ++k) {
-            p.keys[k].reserve(pairs, s);
+            p.tiles[k].reserve(pairs, s);
             p.values[k].reserve(pairs, s);
         }
         GaussianBuffers<T>& g = buffers.gaussians;
         const bool banded = f.bands.size() > 1;
         // Cached frames that re-sort regroup the pairs in emission order (rekey). With the depth
-        // order reused they never read them, and the copy (8 bytes a pair, 6M pairs on the city)
+        // order reused they never read them, and the copy (4 bytes a pair, 6M pairs on the city)
         // would only lengthen key frames; a banded frame starts no window.
         const bool keep = f.plan.keep_emission_order && !banded;
         if (keep) g.emission_offset.reserve(key_space.slots, s);
         cuda::keys(KeysArgs<T>{f.scene, key_space, buffers.window.views.data(), static_cast<int>(f.plan.poses.size()),
                                f.options->culling, f.guard, g.projected.data(), g.touched.data(),
-                               banded ? g.offsets.data() : buffers.depth.ranked_offsets.data(),
-                               banded ? nullptr : buffers.depth.order(), g.sort_depth.data(),
+                               buffers.depth.ranked_offsets.data(), buffers.depth.order(), buffers.depth.ranked,
                                keep ? g.emission_offset.data() : nullptr, rows, banded, f.reproject_actual, pairs,
-                               p.keys[0].data(), p.values[0].data()},
+                               p.tiles[0].data(), p.values[0].data()},
                    s);
         if (keep) {
-            p.emitted_keys.reserve(pairs, s);
-            CATGS_CUDA_CHECK(cudaMemcpyAsync(p.emitted_keys.data(), p.keys[0].data(), pairs * sizeof(std::uint64_t),
+            p.emitted_tiles.reserve(pairs, s);
+            CATGS_CUDA_CHECK(cudaMemcpyAsync(p.emitted_tiles.data(), p.tiles[0].data(), pairs * sizeof(std::uint32_t),
                                              cudaMemcpyDeviceToDevice, s));
         }
     }
@@ -390,9 +389,9 @@ void CudaRenderer<T>::Impl::rekey(const Frame<T>& f) {
     order_by_depth(g.sort_depth.data(), false);
     if (f.total > 0) {
         p.current = 0;
-        cuda::rekey(RekeyArgs<T>{key_space, g.touched.data(), buffers.depth.order(),
-                                 buffers.depth.ranked_offsets.data(), g.emission_offset.data(), p.emitted_keys.data(),
-                                 g.projected.data(), f.view, f.options->culling, p.keys[0].data(), p.values[0].data()},
+        cuda::rekey(RekeyArgs<T>{key_space, g.touched.data(), buffers.depth.order(), buffers.depth.ranked,
+                                 buffers.depth.ranked_offsets.data(), g.emission_offset.data(), p.emitted_tiles.data(),
+                                 g.projected.data(), f.view, f.options->culling, p.tiles[0].data(), p.values[0].data()},
                     stream);
     }
     events.record(Event::keys, stream);
@@ -412,8 +411,8 @@ void CudaRenderer<T>::Impl::add_cached_list_times() {
 
 template <typename T>
 void CudaRenderer<T>::Impl::sort(const Frame<T>& f, std::uint64_t pairs) {
-    // Key frames emit in depth order unless banded; cached frames that re-sort regroup in it.
-    cuda::sort(SortArgs{&buffers.pairs, pairs, f.tile_bits, f.bands.size() == 1}, stream);
+    // Key frames emit in depth order; cached frames that re-sort regroup in it.
+    cuda::sort(SortArgs{&buffers.pairs, pairs, f.tile_bits}, stream);
     events.record(Event::sort, stream);
 }
 
@@ -423,7 +422,7 @@ bool CudaRenderer<T>::Impl::ranges_and_split(const Frame<T>& f, std::uint64_t pa
     const cudaStream_t s = stream;
     const CatgsOptions& catgs = f.options->catgs;
     TileBuffers& t = buffers.tiles;
-    cuda::ranges(RangesArgs{pairs, buffers.pairs.keys[buffers.pairs.current].data(),
+    cuda::ranges(RangesArgs{pairs, buffers.pairs.tiles[buffers.pairs.current].data(),
                             static_cast<std::uint32_t>(f.tiles), f.shared_list, catgs.split_auto ? 0 : catgs.split_k,
                             t.range_begin.data(), t.range_end.data(), task_counters()},
                  s);

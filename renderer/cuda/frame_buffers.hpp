@@ -49,21 +49,25 @@ struct GaussianBuffers {
     DeviceArray<std::uint64_t> visible;   // band path: full-frame tile counts
     DeviceArray<std::uint64_t> touched;   // tile counts for the current pass, with a trailing 0
     DeviceArray<float> sort_depth;        // preprocess: the depth keys sort by
-    DeviceArray<std::uint64_t> offsets;   // scan: exclusive sum; offsets[n] = pass total
     DeviceArray<std::uint8_t> scan_temp;  // CUB's DeviceScan
     /// keys: where each slot's pairs start among a key frame's pairs in emission order (cached
     /// frames that re-sort regroup them from there).
     DeviceArray<std::uint64_t> emission_offset;
 
     std::size_t bytes() const {
-        return projected.bytes() + visible.bytes() + touched.bytes() + sort_depth.bytes() + offsets.bytes() +
-               scan_temp.bytes() + emission_offset.bytes();
+        return projected.bytes() + visible.bytes() + touched.bytes() + sort_depth.bytes() + scan_temp.bytes() +
+               emission_offset.bytes();
     }
 };
 
-/// Per slot, in depth order (depth_order, sort.cuh): the slots front to back, double-buffered
-/// for the sort, and their pair counts and scanned offsets in that order.
+/// The slots with pairs in depth order (depth_order, sort.cuh): their selection in slot order
+/// (a key frame's, which its cached frames keep), then the slots front to back,
+/// double-buffered for the sort, and their pair counts and scanned offsets in that order.
 struct DepthOrderBuffers {
+    DeviceArray<std::uint32_t> with_pairs;      // the slots with pairs, ascending
+    DeviceArray<std::uint64_t> selected_count;  // how many (1 entry)
+    DeviceArray<std::uint8_t> select_temp;
+    std::uint64_t ranked = 0;                   // the selected count, read back
     DeviceArray<std::uint32_t> keys[2];         // depth bits
     DeviceArray<std::uint32_t> slots[2];        // slot indices
     int current = 0;                            // which of keys/slots holds the order
@@ -73,23 +77,25 @@ struct DepthOrderBuffers {
 
     const std::uint32_t* order() const { return slots[current].data(); }
     std::size_t bytes() const {
-        return keys[0].bytes() + keys[1].bytes() + slots[0].bytes() + slots[1].bytes() + ranked_touched.bytes() +
-               ranked_offsets.bytes() + sort_temp.bytes();
+        return with_pairs.bytes() + selected_count.bytes() + select_temp.bytes() + keys[0].bytes() + keys[1].bytes() +
+               slots[0].bytes() + slots[1].bytes() + ranked_touched.bytes() + ranked_offsets.bytes() +
+               sort_temp.bytes();
     }
 };
 
-/// Per tile-Gaussian pair: the keys and values, double-buffered for the sort, and a key
-/// frame's keys in emission order, which cached frames that re-sort re-key from (their values
+/// Per tile-Gaussian pair: its tile (the sort key: the pairs are emitted front to back, so
+/// the tile alone orders them, sort.cuh) and Gaussian, double-buffered for the sort, and a key
+/// frame's tiles in emission order, which cached frames that re-sort re-key from (their values
 /// follow from GaussianBuffers::emission_offset).
 struct PairBuffers {
-    DeviceArray<std::uint64_t> keys[2];
+    DeviceArray<std::uint32_t> tiles[2];
     DeviceArray<std::uint32_t> values[2];
-    int current = 0;  // which of keys/values holds the sorted pairs
-    DeviceArray<std::uint64_t> emitted_keys;
+    int current = 0;  // which of tiles/values holds the sorted pairs
+    DeviceArray<std::uint32_t> emitted_tiles;
     DeviceArray<std::uint8_t> sort_temp;  // CUB's DeviceRadixSort
 
     std::size_t bytes() const {
-        return keys[0].bytes() + keys[1].bytes() + values[0].bytes() + values[1].bytes() + emitted_keys.bytes() +
+        return tiles[0].bytes() + tiles[1].bytes() + values[0].bytes() + values[1].bytes() + emitted_tiles.bytes() +
                sort_temp.bytes();
     }
 };

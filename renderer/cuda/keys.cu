@@ -8,28 +8,26 @@
 namespace catgs::cuda {
 namespace {
 
-// Keys at each Gaussian's offset. With a depth order, thread k emits the k-th nearest slot, so
-// the pairs come out front to back, equal depths in slot order; banded frames emit in slot
-// order for the full-key sort. Either way the stable sort keeps slot (index) order for equal
-// depths. `capacity` bounds every write.
+// Keys (tile ids) at each Gaussian's offset: thread k emits the k-th nearest slot, so the pairs
+// come out front to back, equal depths in slot order, and the stable sort by tile keeps that
+// order within each tile (sort.cuh). `capacity` bounds every write.
 template <typename T, int MaxWindow>
-__global__ void __launch_bounds__(kThreads)
+__global__ void __launch_bounds__(kThreads, 2)
     keys_kernel(DeviceSceneView scene, ChunkSpace space, const View<T>* views, int window, Culling culling, T guard,
                 const Projected<T>* projected, const std::uint64_t* touched, const std::uint64_t* offsets,
-                const std::uint32_t* order, const float* sort_depth, std::uint64_t* emission_offset, TileRows rows,
-                bool band, bool reprojected, std::uint64_t capacity, std::uint64_t* keys, std::uint32_t* values) {
+                const std::uint32_t* order, std::uint64_t ordered, std::uint64_t* emission_offset, TileRows rows,
+                bool band, bool reprojected, std::uint64_t capacity, std::uint32_t* keys, std::uint32_t* values) {
     const std::uint64_t k = static_cast<std::uint64_t>(blockIdx.x) * blockDim.x + threadIdx.x;
-    if (k >= space.slots) return;
-    const std::uint64_t p = order ? order[k] : k;
+    if (k >= ordered) return;
+    const std::uint64_t p = order[k];
     std::uint64_t i = 0;
     if (touched[p] == 0 || !space.gaussian(p, i)) return;
     std::uint64_t slot = offsets[k];
     if (emission_offset) emission_offset[p] = slot;
     const std::uint64_t end = min(slot + touched[p], capacity);
-    const float depth = sort_depth[p];
     auto emit = [&](std::uint32_t tile) {
         if (slot < end) {
-            keys[slot] = make_sort_key(tile, depth);
+            keys[slot] = tile;
             values[slot] = static_cast<std::uint32_t>(i);
         }
         ++slot;
@@ -53,17 +51,17 @@ __global__ void rekey_depth_kernel(ChunkSpace space, const std::uint64_t* touche
 }
 
 // Cached frame, re-sort: every pair the key frame emitted keeps its tile if the footprint at
-// the current pose still touches it (the single-frame predicate) and takes the current depth;
-// otherwise it is parked past the grid (sorts last, no range covers it). Thread k moves the
+// the current pose still touches it (the single-frame predicate); otherwise it is parked past
+// the grid (sorts last, no range covers it). Thread k moves the
 // pairs of the k-th nearest cached slot, so the tile sort leaves each list front to back with
 // equal depths in slot order, as a full render does.
 template <typename T>
 __global__ void rekey_kernel(ChunkSpace space, const std::uint64_t* touched, const std::uint32_t* order,
-                             const std::uint64_t* offsets, const std::uint64_t* emission_offset,
-                             const std::uint64_t* emitted_keys, const Projected<T>* projected, View<T> view,
-                             Culling culling, std::uint64_t* keys, std::uint32_t* values) {
+                             std::uint64_t ordered, const std::uint64_t* offsets, const std::uint64_t* emission_offset,
+                             const std::uint32_t* emitted_tiles, const Projected<T>* projected, View<T> view,
+                             Culling culling, std::uint32_t* keys, std::uint32_t* values) {
     const std::uint64_t k = static_cast<std::uint64_t>(blockIdx.x) * blockDim.x + threadIdx.x;
-    if (k >= space.slots) return;
+    if (k >= ordered) return;
     const std::uint64_t slot = order[k];
     std::uint64_t i = 0;
     const std::uint64_t count = touched[slot];
@@ -72,10 +70,10 @@ __global__ void rekey_kernel(ChunkSpace space, const std::uint64_t* touched, con
     const Projected<T>& p = projected[i];
     const std::uint64_t from = emission_offset[slot], to = offsets[k];
     for (std::uint64_t j = 0; j < count; ++j) {
-        const std::uint32_t tile = key_tile(emitted_keys[from + j]);
+        const std::uint32_t tile = emitted_tiles[from + j];
         // Exact culling shares one list among all tiles: nothing to filter.
         const bool keep = culling == Culling::exact || (p.opacity > T(0) && touches_tile(p, culling, view, tile));
-        keys[to + j] = make_sort_key(keep ? tile : parked_tile(tiles), p.key_depth);
+        keys[to + j] = keep ? tile : parked_tile(tiles);
         values[to + j] = static_cast<std::uint32_t>(i);
     }
 }
@@ -97,15 +95,16 @@ __global__ void count_band_kernel(ChunkSpace space, const Projected<T>* projecte
 
 template <typename T>
 void keys(const KeysArgs<T>& a, cudaStream_t s) {
-    const unsigned blocks = blocks_for(a.space.slots, kThreads);
+    if (a.ordered == 0) return;
+    const unsigned blocks = blocks_for(a.ordered, kThreads);
     if (a.window == 1)
         keys_kernel<T, 1><<<blocks, kThreads, 0, s>>>(a.scene, a.space, a.views, 1, a.culling, a.guard, a.projected,
-                                                      a.touched, a.offsets, a.order, a.sort_depth, a.emission_offset,
+                                                      a.touched, a.offsets, a.order, a.ordered, a.emission_offset,
                                                       a.rows, a.band, a.reprojected, a.capacity, a.keys, a.values);
     else
         keys_kernel<T, kMaxWindow><<<blocks, kThreads, 0, s>>>(
             a.scene, a.space, a.views, a.window, a.culling, a.guard, a.projected, a.touched, a.offsets, a.order,
-            a.sort_depth, a.emission_offset, a.rows, a.band, a.reprojected, a.capacity, a.keys, a.values);
+            a.ordered, a.emission_offset, a.rows, a.band, a.reprojected, a.capacity, a.keys, a.values);
     CATGS_CUDA_CHECK_LAUNCH("keys_kernel");
 }
 
@@ -119,10 +118,10 @@ void rekey_depth(const RekeyDepthArgs<T>& a, cudaStream_t s) {
 
 template <typename T>
 void rekey(const RekeyArgs<T>& a, cudaStream_t s) {
-    if (a.space.slots == 0) return;
-    rekey_kernel<T><<<blocks_for(a.space.slots, kThreads), kThreads, 0, s>>>(
-        a.space, a.touched, a.order, a.offsets, a.emission_offset, a.emitted_keys, a.projected, a.view, a.culling,
-        a.keys, a.values);
+    if (a.ordered == 0) return;
+    rekey_kernel<T><<<blocks_for(a.ordered, kThreads), kThreads, 0, s>>>(
+        a.space, a.touched, a.order, a.ordered, a.offsets, a.emission_offset, a.emitted_tiles, a.projected, a.view,
+        a.culling, a.keys, a.values);
     CATGS_CUDA_CHECK_LAUNCH("rekey_kernel");
 }
 

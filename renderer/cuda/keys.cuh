@@ -28,18 +28,18 @@ struct KeysArgs {
     T guard;
     const Projected<T>* projected;
     const std::uint64_t* touched;
-    /// Where each Gaussian's keys go: with `order`, offsets[k] belongs to the k-th slot of the
-    /// depth order; without (banded frames), offsets are by slot.
+    /// The slots with pairs in depth order (depth_order), `ordered` of them, and where each
+    /// one's keys go: offsets[k] belongs to the k-th slot of the order.
     const std::uint64_t* offsets;
     const std::uint32_t* order;
-    const float* sort_depth;
+    std::uint64_t ordered;
     /// When set, each slot's first pair's position (the pairs are kept for cached frames).
     std::uint64_t* emission_offset;
     TileRows rows;           // the band's tile rows (all of them when not banded)
     bool band;               // banded: one pose, whose geometry preprocess stored
     bool reprojected;        // the window lowered the near plane (PreprocessArgs::reproject_actual)
     std::uint64_t capacity;  // bounds every write
-    std::uint64_t* keys;
+    std::uint32_t* keys;     // tile ids
     std::uint32_t* values;
 };
 
@@ -63,13 +63,14 @@ struct RekeyArgs {
     ChunkSpace space;
     const std::uint64_t* touched;          // the key frame's counts
     const std::uint32_t* order;            // the cached slots in depth order at the current pose
+    std::uint64_t ordered;                 // how many (those with pairs)
     const std::uint64_t* offsets;          // by rank: where each slot's pairs go
     const std::uint64_t* emission_offset;  // by slot: where they are among the emitted pairs
-    const std::uint64_t* emitted_keys;     // the key frame's pairs in emission order
+    const std::uint32_t* emitted_tiles;    // the key frame's pairs' tiles in emission order
     const Projected<T>* projected;         // at the current pose (reproject)
     View<T> view;
     Culling culling;
-    std::uint64_t* keys;
+    std::uint32_t* keys;  // tile ids (parked_tile when the current pose leaves the tile)
     std::uint32_t* values;
 };
 

@@ -1,6 +1,5 @@
 #include "ranges.cuh"
 
-#include "catgs/stages/keys.hpp"
 #include "cuda_check.hpp"
 
 namespace catgs::cuda {
@@ -8,17 +7,17 @@ namespace {
 
 // Tile ranges; ids beyond the grid are ignored rather than written (defence against
 // a corrupted key, the failure mode of gaussian-splatting#781).
-__global__ void ranges_kernel(std::uint64_t n, const std::uint64_t* keys, std::uint32_t tiles,
+__global__ void ranges_kernel(std::uint64_t n, const std::uint32_t* keys, std::uint32_t tiles,
                               std::uint64_t* range_begin, std::uint64_t* range_end, TaskCounters* counters) {
     const std::uint64_t i = static_cast<std::uint64_t>(blockIdx.x) * blockDim.x + threadIdx.x;
     bool first = false, inside = false;
     if (i < n) {
-        const std::uint32_t tile = key_tile(keys[i]);
+        const std::uint32_t tile = keys[i];
         inside = tile < tiles;
         if (inside) {
-            first = i == 0 || key_tile(keys[i - 1]) != tile;
+            first = i == 0 || keys[i - 1] != tile;
             if (first) range_begin[tile] = i;
-            if (i + 1 == n || key_tile(keys[i + 1]) != tile) range_end[tile] = i + 1;
+            if (i + 1 == n || keys[i + 1] != tile) range_end[tile] = i + 1;
         }
     }
     const int block_first = __syncthreads_count(first);

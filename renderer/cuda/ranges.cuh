@@ -12,7 +12,7 @@ namespace catgs::cuda {
 
 struct RangesArgs {
     std::uint64_t pairs;
-    const std::uint64_t* keys;  // sorted
+    const std::uint32_t* keys;  // the sorted pairs' tiles
     std::uint32_t tiles;
     bool shared_list;             // exact culling: one list for every tile, no ranges
     std::uint32_t fixed_split_k;  // the task list's k unless split derives it (0)

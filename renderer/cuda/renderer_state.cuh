@@ -119,11 +119,6 @@ struct CudaRenderer<T>::Impl {
     std::uint64_t max_extra_tasks(const Frame<T>& f, std::uint64_t pairs) const {
         return f.split_used ? pairs / f.k_min + 1 : 0;
     }
-    /// Slot order (banded frames): the scan of `touched` into `offsets`.
-    std::uint64_t scan_counts(std::uint64_t slots) {
-        GaussianBuffers<T>& g = buffers.gaussians;
-        return cuda::scan(ScanArgs{g.touched.data(), g.offsets.data(), slots, &g.scan_temp, host.total.data()}, stream);
-    }
     /// Depth order: the scan of the counts depth_order ranked; reads the total back only when
     /// `read_total` (cached frames know theirs).
     std::uint64_t scan_ranked_counts(std::uint64_t slots, bool read_total) {
@@ -132,12 +127,16 @@ struct CudaRenderer<T>::Impl {
                                    &buffers.gaussians.scan_temp, read_total ? host.total.data() : nullptr},
                           stream);
     }
-    /// The slots with pairs in depth order by `depth` (sort.cuh), then their offsets.
+    /// The slots with pairs in depth order by `depth` (sort.cuh), then their offsets. A key
+    /// frame selects the slots with pairs (one read-back); a cached frame re-sorts that same
+    /// selection (`read_total` false: nothing is read back).
     std::uint64_t order_by_depth(const float* depth, bool read_total) {
-        cuda::depth_order(DepthOrderArgs{key_space.slots, buffers.gaussians.touched.data(), depth, &buffers.depth},
-                          stream);
+        const std::uint64_t ranked =
+            cuda::depth_order(DepthOrderArgs{key_space.slots, buffers.gaussians.touched.data(), depth, &buffers.depth,
+                                             !read_total, host.total.data()},
+                              stream);
         events.record(Event::depth_order, stream);
-        const std::uint64_t total = scan_ranked_counts(key_space.slots, read_total);
+        const std::uint64_t total = scan_ranked_counts(ranked, read_total);
         events.record(Event::scan, stream);
         return total;
     }

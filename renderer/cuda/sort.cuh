@@ -1,11 +1,11 @@
-// sort: the pairs ordered by key, by tile and then front to back.
+// sort: the pairs ordered by tile and, within a tile, front to back.
 //
-// The Gaussians are put in depth order first (depth_order: N 32-bit keys, not pairs), and
-// keys then emits each Gaussian's pairs in that order. A stable radix sort over the tile bits
-// alone then leaves every tile's pairs front to back, ties in Gaussian (slot) order: the order
-// a full sort of the (tile | depth) keys gives, with 2 passes over the pairs instead of 6
-// (32 depth bits + 13..15 tile bits, 8 bits a pass). Banded frames emit in slot order and
-// sort over every used key bit.
+// The Gaussians are put in depth order first (depth_order: 32-bit keys of the slots that have
+// pairs, not of every slot nor of the pairs), and keys then emits each Gaussian's pairs in that
+// order (banded frames too, band by band). A stable radix sort of the pairs' 32-bit tile ids
+// then leaves every tile's pairs front to back, ties in Gaussian (slot) order: the order the
+// CPU backend's sort of (tile | depth) keys gives (catgs/stages/keys.hpp), with 2 passes over
+// 8 bytes a pair instead of 6 over 12 (32 depth bits + 13..15 tile bits, 8 bits a pass).
 #pragma once
 
 #include <cuda_runtime_api.h>
@@ -17,24 +17,33 @@
 namespace catgs::cuda {
 
 struct SortArgs {
-    PairBuffers* pairs;  // sorts keys/values[current]; current then names the sorted pair
+    PairBuffers* pairs;  // sorts tiles/values[current]; current then names the sorted pair
     std::uint64_t count;
-    int tile_bits;
-    /// The pairs were emitted in depth order (depth_order): only the tile bits are sorted.
-    bool depth_ordered = false;
+    int tile_bits;  // sort_key_tile_bits of the grid: the parked tile included
 };
 
 void sort(const SortArgs& args, cudaStream_t stream);
 
 struct DepthOrderArgs {
     std::uint64_t slots;
-    const std::uint64_t* touched;  // per slot: its pairs (0: in no list, sorts last)
+    const std::uint64_t* touched;  // per slot: its pairs (0: in no list, left out of the order)
     const float* depth;            // per slot: the depth its keys carry
-    DepthOrderBuffers* order;      // out: order.slots(), ranked_touched (n + 1 entries, the last 0)
+    DepthOrderBuffers* order;      // out: order.order(), ranked_touched (ranked + 1 entries, the last 0)
+    /// Keep the previous call's slots with pairs (a cached frame re-sorts its key frame's
+    /// lists: same counts), so that nothing is read back.
+    bool reuse_selection = false;
+    std::uint64_t* host_count = nullptr;  // pinned: the read-back of the selected count
 };
 
-/// The slots with pairs, front to back (a stable CUB radix sort of their depth bits, so equal
-/// depths keep slot order), and their pair counts in that order, ready for the scan.
-void depth_order(const DepthOrderArgs& args, cudaStream_t stream);
+/// The slots with pairs, front to back (a stable CUB select of them in slot order, whose count
+/// is read back, then a stable CUB radix sort of their depth bits, so equal depths keep slot
+/// order), and their pair counts in that order, ready for the scan. Slots without pairs are
+/// most of a frame's on large scenes, and a sort over them all was 4 passes over every slot.
+/// Returns how many slots the order holds (order.ranked).
+std::uint64_t depth_order(const DepthOrderArgs& args, cudaStream_t stream);
+
+/// ranked_touched from `touched` in the order depth_order left (a band's own counts over the
+/// frame's order: a band's Gaussians are among the frame's).
+void rank_counts(DepthOrderBuffers& order, const std::uint64_t* touched, cudaStream_t stream);
 
 }  // namespace catgs::cuda

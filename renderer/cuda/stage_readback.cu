@@ -7,6 +7,7 @@
 #include <vector>
 
 #include "catgs/error.hpp"
+#include "catgs/stages/keys.hpp"
 #include "catgs/stages/split.hpp"
 #include "cuda_check.hpp"
 #include "cuda_renderer.hpp"
@@ -14,6 +15,15 @@
 
 namespace catgs::cuda {
 namespace {
+
+/// The depth each Gaussian's keys sorted by, by Gaussian index (the device's pairs carry only
+/// their tile: sort.cuh).
+__global__ void depth_by_gaussian_kernel(ChunkSpace space, const std::uint64_t* touched, const float* sort_depth,
+                                         float* depth_of) {
+    const std::uint64_t p = static_cast<std::uint64_t>(blockIdx.x) * blockDim.x + threadIdx.x;
+    std::uint64_t i = 0;
+    if (p < space.slots && touched[p] > 0 && space.gaussian(p, i)) depth_of[i] = sort_depth[p];
+}
 
 template <typename V>
 std::vector<V> copy_to_host(const V* device, std::size_t count, cudaStream_t stream) {
@@ -37,8 +47,18 @@ StageReadback<T> CudaRenderer<T>::read_back_stages() {
     const PairBuffers& p = m.buffers.pairs;
     const TileBuffers& t = m.buffers.tiles;
     StageReadback<T> r;
-    r.sorted_keys = copy_to_host(p.keys[p.current].data(), last.pairs, s);
+    const std::vector<std::uint32_t> tiles = copy_to_host(p.tiles[p.current].data(), last.pairs, s);
     r.sorted_values = copy_to_host(p.values[p.current].data(), last.pairs, s);
+    const std::uint64_t gaussians = m.scene->count();
+    DeviceArray<float> depth_of;
+    depth_of.reserve(gaussians, s);
+    CATGS_CUDA_CHECK(cudaMemsetAsync(depth_of.data(), 0, gaussians * sizeof(float), s));
+    if (m.key_space.slots > 0) {
+        depth_by_gaussian_kernel<<<blocks_for(m.key_space.slots, kThreads), kThreads, 0, s>>>(
+            m.key_space, m.buffers.gaussians.touched.data(), m.buffers.gaussians.sort_depth.data(), depth_of.data());
+        CATGS_CUDA_CHECK_LAUNCH("depth_by_gaussian_kernel");
+    }
+    const std::vector<float> depth = copy_to_host(depth_of.data(), gaussians, s);
     const std::vector<std::uint64_t> begin = copy_to_host(t.range_begin.data(), last.tiles, s);
     const std::vector<std::uint64_t> end = copy_to_host(t.range_end.data(), last.tiles, s);
     const std::uint64_t labels = std::min<std::uint64_t>(last.tasks.extra_tasks, last.max_extra);  // as rasterize reads
@@ -50,6 +70,9 @@ StageReadback<T> CudaRenderer<T>::read_back_stages() {
                                           : 0;
     std::vector<Partial<T>> partials = copy_to_host(m.buffers.pixels.partials.data(), partial_count, s);
     CATGS_CUDA_CHECK(cudaStreamSynchronize(s));
+    r.sorted_keys.resize(tiles.size());
+    for (std::size_t j = 0; j < tiles.size(); ++j)
+        r.sorted_keys[j] = make_sort_key(tiles[j], depth[r.sorted_values[j]]);
 
     r.tile_ranges.resize(last.tiles);
     for (std::size_t i = 0; i < last.tiles; ++i)
