@@ -7,11 +7,11 @@
 namespace catgs::cuda {
 namespace {
 
-/// What the rasterizer reads of one Gaussian, staged in shared memory. min_power lets a
-/// pixel skip the exp where alpha cannot reach 1/255 (most pixels of a tile lie outside a
-/// Gaussian's 1/255 ellipse): one log per pair when staged instead of an exp per pixel.
-/// Aligned so that a warp reads it with 16-byte loads (3 in float, not 10 of 4 bytes): the
-/// kernel is bound by the instructions it issues.
+/// What the rasterizer reads of one Gaussian, staged in shared memory, with its conic and
+/// min_power in AlphaMath's domain. min_power lets a pixel skip the exp where alpha cannot
+/// reach 1/255 (most pixels of a tile lie outside a Gaussian's 1/255 ellipse): one log per pair
+/// when staged instead of an exp per pixel. Aligned so that a warp reads it with 16-byte loads
+/// (3 in float, not 10 of 4 bytes): the kernel is bound by the instructions it issues.
 template <typename T>
 struct alignas(16) Splat {
     Vec2<T> mean;
@@ -21,17 +21,43 @@ struct alignas(16) Splat {
     Vec3<T> colour;
 };
 
-/// alpha's exponential. In float, the hardware's (__expf): within 2 + 1.16 |x| ulp, so within
-/// 5e-7 relative on the powers that can reach alpha = 1/255 (|x| < 5.6), far below the 8-bit
-/// output's 2e-3; it cut rasterize by 2-4% on the bench kit's paths (H200, session 9). Double,
-/// the reference precision, keeps the exact exp.
+/// alpha's exponent and exponential. Double, the reference precision, keeps the reference's
+/// own math (gaussian_power, the exact exp). Float works in base 2: the conic is staged
+/// pre-multiplied by -log2(e)/2 (-log2(e) off the diagonal), so that a pixel's exponent is
+/// 5 flops instead of 8 and alpha's exponential one ex2, the instruction __expf issues after its
+/// own multiply by log2(e). ex2.approx.ftz is within 2^-22 relative; with the pre-scaling's
+/// roundings the exponent is within a few ulp of log2(e) times the reference's, so alpha is
+/// within about 1e-6 relative on the powers that can reach 1/255, far below the 8-bit output's
+/// 2e-3.
 template <typename T>
-struct AlphaExp {
-    __device__ T operator()(T v) const { return exp_of(v); }
+struct AlphaMath {
+    __device__ static Vec3<T> staged_conic(Vec3<T> conic) { return conic; }
+    __device__ static T staged_min_power(T opacity) { return min_visible_power(opacity); }
+    __device__ static T power(const Splat<T>& s, T px, T py) { return gaussian_power(s.mean, s.conic, px, py); }
+    __device__ T operator()(T power) const { return exp_of(power); }
 };
 template <>
-struct AlphaExp<float> {
-    __device__ float operator()(float v) const { return __expf(v); }
+struct AlphaMath<float> {
+    static constexpr float kLog2E = 1.4426950408889634f;
+    /// min_power is only a filter before blend's own alpha test: lowered by this many log2 units
+    /// (alpha 0.007% below 1/255) so that no rounding of the staged values can drop a pixel
+    /// whose alpha reaches 1/255.
+    static constexpr float kMinPowerMargin = 1e-4f;
+    __device__ static Vec3<float> staged_conic(Vec3<float> c) {
+        return {-0.5f * kLog2E * c.x, -kLog2E * c.y, -0.5f * kLog2E * c.z};
+    }
+    __device__ static float staged_min_power(float opacity) {
+        return kLog2E * min_visible_power(opacity) - kMinPowerMargin;
+    }
+    __device__ static float power(const Splat<float>& s, float px, float py) {
+        const float dx = s.mean.x - px, dy = s.mean.y - py;
+        return dx * fmaf(s.conic.y, dy, s.conic.x * dx) + s.conic.z * dy * dy;
+    }
+    __device__ float operator()(float power) const {
+        float alpha_scale;
+        asm("ex2.approx.ftz.f32 %0, %1;" : "=f"(alpha_scale) : "f"(power));
+        return alpha_scale;
+    }
 };
 
 // Each warp shades an 8x4 block of its 16x16 tile (2 across, 4 down). While a batch is staged,
@@ -85,7 +111,8 @@ __global__ void __launch_bounds__(kTilePixels)
         const std::uint64_t idx = start + thread;
         if (idx < end) {
             const Projected<T>& p = projected[values[idx]];
-            batch[thread] = Splat<T>{p.mean, p.conic, min_visible_power(p.opacity), p.opacity, p.colour};
+            batch[thread] = Splat<T>{p.mean, AlphaMath<T>::staged_conic(p.conic),
+                                     AlphaMath<T>::staged_min_power(p.opacity), p.opacity, p.colour};
             std::uint8_t bits = 0xff;
             if (grid.warp_skip) {
                 const PixelBox<T> box = visible_box(p);
@@ -111,10 +138,10 @@ __global__ void __launch_bounds__(kTilePixels)
                 todo &= todo - 1;
                 if (acc.done) continue;
                 const Splat<T> s = batch[j];  // by value: three 16-byte loads in float
-                const T power = gaussian_power(s.mean, s.conic, px, py);
-                // Only rounding at alpha = 1/255 can differ from blend_gaussian's own test
-                // (and, in float, the hardware exp's last bits).
-                if (power >= s.min_power) blend_power_with(acc, power, s.opacity, s.colour, threshold, AlphaExp<T>{});
+                const T power = AlphaMath<T>::power(s, px, py);
+                // blend's tests decide (its power <= 0 holds in either domain); in float only
+                // rounding at alpha = 1/255 and the hardware exp's last bits can differ.
+                if (power >= s.min_power) blend_power_with(acc, power, s.opacity, s.colour, threshold, AlphaMath<T>{});
             }
         }
     }
