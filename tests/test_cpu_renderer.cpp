@@ -253,6 +253,26 @@ TEST(CpuRendererAnalytic, InvalidIntrinsicsAreRejectedWithTheirName) {
     }
 }
 
+// A side past kMaxImageSide is refused before anything is allocated for it.
+TEST(CpuRendererAnalytic, OversizedImagesAreRejectedWithTheirSize) {
+    const Scene scene = single_gaussian({0, 0, 3}, 0.5f, 0.9f, {1, 0, 0});
+    Camera cam = test::forward_camera(16, 16, 60.0);
+    cam.name = "huge";
+    cam.intrinsics.width = kMaxImageSide + 1;
+    CpuRenderer<float> renderer;
+    ImageF out;
+    try {
+        renderer.render(scene, cam, RenderOptions{}, out);
+        FAIL() << "no error";
+    } catch (const Error& e) {
+        EXPECT_NE(std::string(e.what()).find("camera 'huge': image size 16385x16 exceeds the largest supported "
+                                             "side, 16384"),
+                  std::string::npos)
+            << e.what();
+    }
+    EXPECT_TRUE(out.rgb.empty());
+}
+
 // --- Comparisons on fresh random scenes -------------------------------------------------
 
 struct RandomCase {

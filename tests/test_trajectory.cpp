@@ -259,6 +259,8 @@ TEST(TrajectoryFile, ErrorsNameFileLineAndProblem) {
         {ok + "0 0 0 0 1 0 0 0 500 500 320 240 0 480\n", {":2: width 0 must be a positive whole number"}},
         {ok + "0 0 0 0 1 0 0 0 500 500 320 240 640 480.5\n", {":2: height 480.5 must be a positive whole number"}},
         {ok + "0 0 0 0 1 0 0 0 0 500 320 240 640 480\n", {":2: focal lengths"}},
+        {ok + "0 0 0 0 1 0 0 0 500 500 320 240 100000 100000\n",
+         {":2: image size 100000x100000 exceeds the largest supported side, 16384"}},
         {"# only a comment\n\n", {"no cameras"}},
     };
     for (std::size_t i = 0; i < cases.size(); ++i) {

@@ -23,6 +23,9 @@ void validate(const Intrinsics& k, const std::string& what) {
     if (k.width <= 0 || k.height <= 0)
         throw Error(what + ": image size " + std::to_string(k.width) + "x" + std::to_string(k.height) +
                     " must be positive");
+    if (k.width > kMaxImageSide || k.height > kMaxImageSide)
+        throw Error(what + ": image size " + std::to_string(k.width) + "x" + std::to_string(k.height) +
+                    " exceeds the largest supported side, " + std::to_string(kMaxImageSide));
     if (!(std::isfinite(k.fx) && std::isfinite(k.fy) && k.fx > 0 && k.fy > 0))
         throw Error(what + ": focal lengths fx=" + std::to_string(k.fx) + ", fy=" + std::to_string(k.fy) +
                     " must be finite and positive");

@@ -63,6 +63,11 @@ inline constexpr double kBBoxEigenFloor = 0.1;
 /// The 3-sigma extent of the graphdeco baseline (`bbox3sigma`).
 inline constexpr double kBBoxSigmas = 3.0;
 
+/// The largest image side any renderer accepts (and the protocol's, request_validation.hpp): a
+/// 16384x16384 frame already holds 3.2 GB of float colour on the CPU; a larger request, say a
+/// trajectory line's 100000x100000, is refused by name instead of allocating without bound.
+inline constexpr int kMaxImageSide = 16384;
+
 /// Most poses a speculative window may hold (CaT-GS: W in 1..16); a window's validity mask
 /// is a 32-bit word.
 inline constexpr int kMaxWindow = 16;

@@ -21,7 +21,7 @@ namespace catgs::server {
 
 /// Images larger than this in either dimension are malformed requests (INVALID_ARGUMENT),
 /// whatever the server's configured limit (which gives RESOURCE_EXHAUSTED below it).
-inline constexpr std::uint32_t kMaxProtocolDimension = 16384;
+inline constexpr std::uint32_t kMaxProtocolDimension = kMaxImageSide;
 /// Flight plans longer than the largest speculation window are of no use to the renderer.
 inline constexpr int kMaxFlightPlanPoses = kMaxWindow;
 /// SessionConfig.client_name goes into log lines: longer names are malformed requests.
