@@ -70,4 +70,35 @@ TEST(CliOptions, SpzAxesTakesRdfOrRub) {
     }
 }
 
+/// --width, --height and --fov are refused as they are parsed, before a scene loads, with the
+/// bound in the message; values inside the bounds pass unchanged.
+TEST(CliOptions, ImageSideAndFieldOfViewAreCheckedWhenParsed) {
+    const auto parse = [](const std::string& args, int& width, double& fov) {
+        CLI::App app{"test"};
+        app.add_option("--width", width)->check(catgs::cli::image_side());
+        app.add_option("--fov", fov)->check(catgs::cli::horizontal_fov());
+        app.parse(args, false);
+    };
+    int width = 1;
+    double fov = 1;
+    parse("--width 16384 --fov 179.5", width, fov);
+    EXPECT_EQ(width, 16384);
+    EXPECT_DOUBLE_EQ(fov, 179.5);
+    for (const auto& [args, message] :
+         {std::pair{"--width 0", "--width: Value 0 not in range 1 to 16384"},
+          std::pair{"--width 16385", "--width: Value 16385 not in range 1 to 16384"},
+          std::pair{"--fov 180",
+                    "--fov: the horizontal field of view must be strictly between 0 and 180 degrees, not 180"},
+          std::pair{"--fov 0", "strictly between 0 and 180 degrees, not 0"},
+          std::pair{"--fov -5", "strictly between 0 and 180 degrees, not -5"},
+          std::pair{"--fov nan", "strictly between 0 and 180 degrees, not nan"}}) {
+        try {
+            parse(args, width, fov);
+            FAIL() << args << " accepted";
+        } catch (const CLI::ParseError& e) {
+            EXPECT_NE(std::string(e.what()).find(message), std::string::npos) << args << ": " << e.what();
+        }
+    }
+}
+
 }  // namespace
