@@ -10,7 +10,9 @@ namespace {
 
 // Keys (tile ids) at each Gaussian's offset: thread k emits the k-th nearest slot, so the pairs
 // come out front to back, equal depths in slot order, and the stable sort by tile keeps that
-// order within each tile (sort.cuh). `capacity` bounds every write.
+// order within each tile (sort.cuh). `capacity` bounds every write. Bounded at 2 blocks an SM
+// (128 registers): with the bare thread bound, ptxas held the window instance to 64 registers
+// and spilled, which the build rejects; at 2 both instances take 80, without spilling.
 template <typename T, int MaxWindow>
 __global__ void __launch_bounds__(kThreads, 2)
     keys_kernel(DeviceSceneView scene, ChunkSpace space, const View<T>* views, int window, Culling culling, T guard,
