@@ -1,6 +1,7 @@
-// Random inputs for the stage-function tests: the host tests (test_stage_math.cpp) check each
-// stage function against a double reference, the device tests (gpu/test_stage_math_device.cu)
-// run the same functions in tiny kernels on the same kind of inputs and compare bit for bit.
+// Random inputs for the stage-function tests: the host tests (test_stage_math.cpp,
+// test_stage_tiles.cpp) check each stage function against a double reference, the device
+// tests (gpu/test_stage_math_device.cu) run the same functions in tiny kernels on the same
+// kind of inputs and compare bit for bit.
 // C++17 and host-only, so that nvcc compiles it for the device test.
 #pragma once
 

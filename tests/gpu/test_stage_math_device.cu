@@ -1,6 +1,6 @@
 // The shared stage functions on the device: each runs in a tiny kernel on fresh random inputs
-// and must give bit for bit what the same function gives on the host (test_stage_math.cpp
-// checks the host against double references): projection geometry, tile rectangles, the
+// and must give bit for bit what the same function gives on the host (test_stage_math.cpp and
+// test_stage_tiles.cpp check the host against double references): projection geometry, tile rectangles, the
 // ellipse-tile test, sort keys, the sub-task blend and the merge, the envelope bound.
 //
 // This file is compiled with -fmad=false (tests/CMakeLists.txt): the renderer's kernels let
