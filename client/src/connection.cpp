@@ -1,7 +1,6 @@
 #include "connection.hpp"
 
 #include <cstdio>
-#include <fstream>
 #include <random>
 
 #include "catgs/common/files.hpp"
@@ -17,11 +16,8 @@ void Connection::add_metadata(grpc::ClientContext& context, const std::string& a
 
 std::string Connection::authorization() const {
     if (token_file.empty()) return "";
-    std::ifstream in(token_file);
-    std::string token;
-    if (!in || !std::getline(in, token) || token.empty())
-        throw Error("--token-file '" + token_file + "': cannot read a token from its first line");
-    return "Bearer " + token;
+    // The server reads its --token-file the same way: the same file gives the same token.
+    return "Bearer " + read_token(token_file);
 }
 
 std::shared_ptr<grpc::Channel> Connection::channel(bool own_connection) const {

@@ -9,9 +9,7 @@
 // quaternion is premultiplied by (w, x, y, z) = (0, 0, 0, 1), and each SH coefficient of
 // degree l and index c (m = c - l) is multiplied by (-1)^m, the half turn's action on it.
 
-#include <fcntl.h>
 #include <sys/mman.h>
-#include <sys/stat.h>
 #include <tiny_gltf.h>
 #include <unistd.h>
 
@@ -21,6 +19,7 @@
 #include <string>
 #include <vector>
 
+#include "catgs/regular_file.hpp"
 #include "catgs/scene_io.hpp"
 #include "scene_io_detail.hpp"
 
@@ -53,17 +52,9 @@ std::uint32_t le32(const unsigned char* p) {
 class MappedFile {
 public:
     explicit MappedFile(const std::string& path) {
-        fd_ = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
-        if (fd_ < 0) {
-            const int error = errno;
-            fail(path, "cannot open: " + std::string(std::strerror(error)), "");
-        }
-        struct stat info {};
-        if (::fstat(fd_, &info) != 0 || !S_ISREG(info.st_mode)) {
-            ::close(fd_);
-            fail(path, "cannot open: not a regular file", "");
-        }
-        size_ = static_cast<std::uint64_t>(info.st_size);
+        std::string problem;
+        fd_ = open_regular_file(path, size_, problem);
+        if (fd_ < 0) fail(path, "cannot open: " + problem, "");
         if (size_ == 0) return;
         void* data = ::mmap(nullptr, size_, PROT_READ, MAP_PRIVATE, fd_, 0);
         if (data == MAP_FAILED) {

@@ -1,6 +1,6 @@
 #include "scene_io_detail.hpp"
 
-#include <sys/stat.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <cerrno>
@@ -10,6 +10,7 @@
 #include <limits>
 
 #include "catgs/error.hpp"
+#include "catgs/regular_file.hpp"
 
 namespace catgs::io {
 
@@ -99,22 +100,15 @@ std::string quote(std::string_view text) {
 // ---------------------------------------------------------------------------------------
 
 FileReader::FileReader(const std::string& path) : path_(path) {
-    file_ = std::fopen(path.c_str(), "rb");
+    std::string problem;
+    const int fd = open_regular_file(path, size_, problem);
+    if (fd < 0) fail(path, "cannot open: " + problem, "");
+    file_ = ::fdopen(fd, "rb");
     if (!file_) {
-        int error = errno;
+        const int error = errno;
+        ::close(fd);
         fail(path, std::string("cannot open: ") + std::strerror(error), "");
     }
-    struct stat info {};
-    if (::fstat(::fileno(file_), &info) != 0) {
-        int error = errno;
-        std::fclose(file_);
-        fail(path, std::string("cannot stat: ") + std::strerror(error), "");
-    }
-    if (!S_ISREG(info.st_mode)) {
-        std::fclose(file_);
-        fail(path, "cannot open: not a regular file", "");
-    }
-    size_ = static_cast<std::uint64_t>(info.st_size);
     buffer_.resize(static_cast<std::size_t>(std::min<std::uint64_t>(size_, kChunkBytes)));
 }
 

@@ -1,13 +1,14 @@
 // The two sources of a SOG's textures (sog_files.hpp).
 #include "sog_files.hpp"
 
-#include <sys/stat.h>
+#include <unistd.h>
 #include <zip.h>
 
 #include <cerrno>
 #include <cstring>
 #include <filesystem>
 
+#include "catgs/regular_file.hpp"
 #include "scene_io_detail.hpp"
 
 namespace catgs::sog {
@@ -141,15 +142,15 @@ private:
 }  // namespace
 
 FilePtr open_regular(const std::string& path, const std::string& file, const std::string& where, std::uint64_t& size) {
-    FilePtr handle(std::fopen(file.c_str(), "rb"));
+    std::string problem;
+    const int fd = open_regular_file(file, size, problem);
+    if (fd < 0) fail(path, "cannot open: " + problem, where);
+    FilePtr handle(::fdopen(fd, "rb"));
     if (!handle) {
         const int error = errno;
+        ::close(fd);
         fail(path, "cannot open: " + std::string(std::strerror(error)), where);
     }
-    struct stat info {};
-    if (::fstat(::fileno(handle.get()), &info) != 0 || !S_ISREG(info.st_mode))
-        fail(path, "cannot open: not a regular file", where);
-    size = static_cast<std::uint64_t>(info.st_size);
     return handle;
 }
 

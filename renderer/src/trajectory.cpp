@@ -11,11 +11,14 @@
 #include <cstdint>
 #include <filesystem>
 #include <fstream>
+#include <optional>
+#include <sstream>
 #include <utility>
 
 #include <nlohmann/json.hpp>
 
 #include "catgs/error.hpp"
+#include "catgs/regular_file.hpp"
 #include "trajectory_detail.hpp"
 
 namespace catgs {
@@ -79,11 +82,12 @@ int image_size(const std::string& where, const char* name, double value) {
 }  // namespace
 
 std::vector<Camera> read_cameras_json(const std::string& path) {
-    std::ifstream in(path, std::ios::binary);
-    if (!in) throw Error(path + ": cannot open cameras file");
+    std::string problem;
+    const std::optional<std::string> text = read_regular_file(path, kMaxCameraFileBytes, problem);
+    if (!text) throw Error(path + ": cannot open cameras file: " + problem);
     nlohmann::json doc;
     try {
-        doc = nlohmann::json::parse(in);
+        doc = nlohmann::json::parse(*text);
     } catch (const nlohmann::json::parse_error& e) {
         throw Error(path + ": not JSON (at byte " + std::to_string(e.byte) + "): " + e.what());
     } catch (const nlohmann::json::exception& e) {
@@ -166,8 +170,10 @@ std::vector<Camera> read_cameras_json(const std::string& path) {
 }
 
 std::vector<Camera> read_trajectory(const std::string& path, const Intrinsics& defaults) {
-    std::ifstream in(path);
-    if (!in) throw Error(path + ": cannot open trajectory file");
+    std::string problem;
+    const std::optional<std::string> text = read_regular_file(path, kMaxCameraFileBytes, problem);
+    if (!text) throw Error(path + ": cannot open trajectory file: " + problem);
+    std::istringstream in(*text);
     std::vector<Camera> cameras;
     std::string line;
     for (std::size_t line_number = 1; std::getline(in, line); ++line_number) {

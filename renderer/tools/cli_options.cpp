@@ -12,6 +12,7 @@
 
 #include "catgs/cache.hpp"
 #include "catgs/error.hpp"
+#include "catgs/regular_file.hpp"
 
 namespace catgs::cli {
 
@@ -226,11 +227,10 @@ std::array<float, 3> parse_background(const std::string& text) {
 
 std::vector<SweepEntry> parse_sweep(std::string text) {
     if (!text.empty() && text[0] == '@') {
-        std::ifstream in(text.substr(1));
-        if (!in) throw Error("--sweep '" + text + "': cannot open the file");
-        std::stringstream all;
-        all << in.rdbuf();
-        text = all.str();
+        std::string problem;
+        const std::optional<std::string> file = read_regular_file(text.substr(1), kMaxSmallFileBytes, problem);
+        if (!file) throw Error("--sweep '" + text + "': cannot open the file: " + problem);
+        text = *file;
         std::replace(text.begin(), text.end(), '\n', ';');
     }
     std::vector<SweepEntry> configs;

@@ -6,7 +6,8 @@
 
 namespace catgs {
 
-/// The whole file, as bytes. Throws catgs::Error "FLAG 'PATH': cannot read the file".
+/// The whole file, as bytes: a regular file of at most kMaxSmallFileBytes. Throws
+/// catgs::Error "FLAG 'PATH': cannot read the file: REASON".
 std::string read_file(const std::string& path, const std::string& flag);
 
 /// A bearer token: the file's first line without trailing blanks and carriage return.
