@@ -5,6 +5,8 @@
 #include <string>
 #include <tuple>
 
+#include "catgs/common/command_line.hpp"
+#include "catgs/parallel.hpp"
 #include "catgs/render_options.hpp"
 #include "cli_options.hpp"
 
@@ -94,6 +96,30 @@ TEST(CliOptions, ImageSideAndFieldOfViewAreCheckedWhenParsed) {
           std::pair{"--fov nan", "strictly between 0 and 180 degrees, not nan"}}) {
         try {
             parse(args, width, fov);
+            FAIL() << args << " accepted";
+        } catch (const CLI::ParseError& e) {
+            EXPECT_NE(std::string(e.what()).find(message), std::string::npos) << args << ": " << e.what();
+        }
+    }
+}
+
+// Thread counts from 0 (all cores) to kMaxThreads: a negative count or a typo such as 100000
+// is refused while parsing, before any thread starts.
+TEST(CliOptions, ThreadCountsAreCheckedWhenParsed) {
+    const auto parse = [](const std::string& args) {
+        int threads = -7;
+        CLI::App app{"test"};
+        app.add_option("--threads", threads)->check(catgs::thread_count());
+        app.parse(args, false);
+        return threads;
+    };
+    EXPECT_EQ(parse("--threads 0"), 0);
+    EXPECT_EQ(parse("--threads 1024"), catgs::kMaxThreads);
+    for (const auto& [args, message] : {std::pair{"--threads -1", "--threads: Value -1 not in range 0 to 1024"},
+                                        std::pair{"--threads 1025", "--threads: Value 1025 not in range 0 to 1024"},
+                                        std::pair{"--threads 100000", "not in range 0 to 1024"}}) {
+        try {
+            parse(args);
             FAIL() << args << " accepted";
         } catch (const CLI::ParseError& e) {
             EXPECT_NE(std::string(e.what()).find(message), std::string::npos) << args << ": " << e.what();

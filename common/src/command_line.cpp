@@ -5,6 +5,7 @@
 
 #include "catgs/common/exit_codes.hpp"
 #include "catgs/error.hpp"
+#include "catgs/parallel.hpp"
 
 namespace catgs {
 
@@ -20,6 +21,10 @@ std::optional<int> parse_command_line(CLI::App& app, int argc, char** argv, cons
         return kExitBadInput;
     }
     return std::nullopt;
+}
+
+CLI::Validator thread_count() {
+    return CLI::Range(0, kMaxThreads);
 }
 
 int run_reporting_errors(const char* tool, const std::function<int()>& body) {

@@ -362,7 +362,9 @@ int main(int argc, char** argv) {
         ->check(catgs::cli::horizontal_fov());
     app.add_option("--warmup", o.warmup, "untimed renders of the first camera before timing")->capture_default_str();
     app.add_option("--max-frames", o.max_frames, "time at most this many cameras (-1: all)")->capture_default_str();
-    app.add_option("--threads", o.threads, "CPU threads for the cpu backend (0: all)")->capture_default_str();
+    app.add_option("--threads", o.threads, "CPU threads for the cpu backend (0: all)")
+        ->check(catgs::thread_count())
+        ->capture_default_str();
     app.add_option("--json-out", o.json_out, "write per-frame and summary results as JSON to this file");
     app.add_option("--csv-out", o.csv_out, "write one CSV row per configuration to this file");
     app.add_flag("--quiet", o.quiet, "no progress output on stderr");

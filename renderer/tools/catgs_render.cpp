@@ -273,7 +273,7 @@ int main(int argc, char** argv) {
         ->capture_default_str()
         ->check(catgs::cli::horizontal_fov());
     app.add_option("--near", o.near_plane, "near plane (view-space z)")->capture_default_str();
-    app.add_option("--threads", o.threads, "CPU threads (0: all)")->capture_default_str();
+    app.add_option("--threads", o.threads, "CPU threads (0: all)")->check(catgs::thread_count())->capture_default_str();
     app.add_option("--shards", o.shards,
                    "render each frame as K spatial shards of the scene, one renderer each (taking turns on the "
                    "backend's device), composited front to back (docs/sharding.md)")

@@ -79,17 +79,21 @@ void add_serving_options(CLI::App& app, CommandLine& c) {
 void add_worker_options(CLI::App& app, CommandLine& c) {
     catgs::server::ServerOptions& o = c.o;
     app.add_option("--render-threads", o.render_threads, "CPU backend: threads per render (0: all cores)")
+        ->check(catgs::thread_count())
         ->capture_default_str();
     app.add_option("--render-workers", o.render_workers,
                    "sessions rendering at the same time (" + catgs::server::auto_worker_counts_help() + ")")
+        ->check(catgs::thread_count())
         ->capture_default_str();
     app.add_option("--encode-workers", o.encode_workers, "JPEG/PNG encoder threads (0: auto, see --render-workers)")
+        ->check(catgs::thread_count())
         ->capture_default_str();
     app.add_option("--jpeg-encoder", c.jpeg_encoder,
                    "auto (nvJPEG when built in and a GPU is usable, else TurboJPEG), turbo or nvjpeg")
         ->capture_default_str();
     app.add_option("--encode-threads", c.encoder_options.threads,
                    "threads one frame's JPEG strips or PNG chunks are spread over (0: all cores)")
+        ->check(catgs::thread_count())
         ->capture_default_str();
 }
 
@@ -159,8 +163,6 @@ void finish_options(CommandLine& c) {
     o.reflection = !c.no_reflection;
     if (o.limits.max_sessions < 1) throw catgs::Error("--max-sessions must be >= 1");
     if (o.limits.max_width < 1 || o.limits.max_height < 1) throw catgs::Error("--max-width/--max-height must be >= 1");
-    if (o.render_workers < 0 || o.encode_workers < 0)
-        throw catgs::Error("--render-workers/--encode-workers must be >= 0 (0: auto)");
     if (!o.bearer_token.empty() && o.tls_cert_file.empty())
         spdlog::warn("bearer token over plaintext: anyone on the path can read it; use --tls-cert/--tls-key");
     c.encoder_options.jpeg = catgs::server::parse_jpeg_encoder(c.jpeg_encoder);

@@ -8,10 +8,15 @@
 #include <cstddef>
 #include <exception>
 #include <mutex>
+#include <system_error>
 #include <thread>
 #include <vector>
 
 namespace catgs {
+
+/// The most threads a flag may ask for: far above any host's cores (more only costs thread
+/// starts), low enough that a typo such as 100000 is refused instead of starting that many.
+inline constexpr int kMaxThreads = 1024;
 
 inline int default_thread_count() {
     unsigned n = std::thread::hardware_concurrency();
@@ -43,7 +48,12 @@ void parallel_for(std::size_t n, std::size_t grain, int threads, Body&& body) {
     } else {
         std::vector<std::thread> pool;
         pool.reserve(static_cast<std::size_t>(workers - 1));
-        for (int i = 1; i < workers; ++i) pool.emplace_back(work);
+        // A host out of threads (ulimit -u, a container's pids limit) gets the work done by
+        // those that started: the results do not depend on their number.
+        try {
+            for (int i = 1; i < workers; ++i) pool.emplace_back(work);
+        } catch (const std::system_error&) {
+        }
         work();
         for (auto& t : pool) t.join();
     }

@@ -18,6 +18,10 @@ std::optional<int> parse_command_line(CLI::App& app, int argc, char** argv, cons
 /// Runs `body` and turns what it throws into the one-line error and the exit status above.
 int run_reporting_errors(const char* tool, const std::function<int()>& body);
 
+/// A flag counting threads: 0 (as many as the host has cores) to kMaxThreads, checked as it is
+/// parsed.
+CLI::Validator thread_count();
+
 /// parse_command_line, then run_reporting_errors: the whole of most tools' main().
 int run_command_line(CLI::App& app, int argc, char** argv, const char* tool, const std::function<int()>& body);
 
