@@ -77,8 +77,8 @@ TEST(CliOptions, SpzAxesTakesRdfOrRub) {
 TEST(CliOptions, ImageSideAndFieldOfViewAreCheckedWhenParsed) {
     const auto parse = [](const std::string& args, int& width, double& fov) {
         CLI::App app{"test"};
-        app.add_option("--width", width)->check(catgs::cli::image_side());
-        app.add_option("--fov", fov)->check(catgs::cli::horizontal_fov());
+        app.add_option("--width", width)->check(catgs::image_side());
+        app.add_option("--fov", fov)->check(catgs::horizontal_fov());
         app.parse(args, false);
     };
     int width = 1;
@@ -123,6 +123,28 @@ TEST(CliOptions, ThreadCountsAreCheckedWhenParsed) {
             FAIL() << args << " accepted";
         } catch (const CLI::ParseError& e) {
             EXPECT_NE(std::string(e.what()).find(message), std::string::npos) << args << ": " << e.what();
+        }
+    }
+}
+
+// bounded_number refuses NaN, which CLI::Range lets through (NaN compares false both ways).
+TEST(CliOptions, BoundedNumbersRefuseNanAndNameTheUnit) {
+    const auto parse = [](const std::string& args) {
+        double rate = -1;
+        CLI::App app{"test"};
+        app.add_option("--rate", rate)->check(catgs::bounded_number(0, 1000, "poses per second"));
+        app.parse(args, false);
+        return rate;
+    };
+    EXPECT_EQ(parse("--rate 0"), 0);
+    EXPECT_EQ(parse("--rate 1000"), 1000);
+    for (const char* value : {"nan", "-0.5", "1000.5", "inf", "abc"}) {
+        try {
+            parse(std::string("--rate ") + value);
+            FAIL() << value << " accepted";
+        } catch (const CLI::ParseError& e) {
+            EXPECT_EQ(std::string(e.what()),
+                      std::string("--rate: expected poses per second in [0, 1000], not ") + value);
         }
     }
 }

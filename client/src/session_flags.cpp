@@ -5,6 +5,7 @@
 #include <random>
 #include <thread>
 
+#include "catgs/common/command_line.hpp"
 #include "catgs/error.hpp"
 #include "catgs/render_options.hpp"
 #include "catgs/trajectory.hpp"
@@ -17,11 +18,13 @@ void add_session_flags(CLI::App* app, SessionFlags& f) {
     app->add_option("--trajectory", f.trajectory,
                     "trajectory file or builtin:survey|orbit|flythrough|hover?... laid over the scene's bounds")
         ->capture_default_str();
-    app->add_option("--width", f.width, "image width")->capture_default_str();
-    app->add_option("--height", f.height, "image height")->capture_default_str();
-    app->add_option("--fov", f.fov, "horizontal field of view, degrees")->capture_default_str();
+    app->add_option("--width", f.width, "image width")->check(image_side())->capture_default_str();
+    app->add_option("--height", f.height, "image height")->check(image_side())->capture_default_str();
+    app->add_option("--fov", f.fov, "horizontal field of view, degrees")
+        ->check(horizontal_fov())
+        ->capture_default_str();
     app->add_option("--encoding", f.encoding, "jpeg, png or raw")->capture_default_str();
-    app->add_option("--quality", f.quality, "JPEG quality 1..100")->capture_default_str();
+    app->add_option("--quality", f.quality, "JPEG quality 1..100")->check(CLI::Range(1, 100))->capture_default_str();
     app->add_option("--cache", f.cache,
                     "server, off or speculative (the inter-frame cache; the server's default is speculative)")
         ->capture_default_str();
@@ -38,11 +41,14 @@ void add_session_flags(CLI::App* app, SessionFlags& f) {
                     "they have turned at most this much from it (180: always, the paper's cache)")
         ->capture_default_str();
     app->add_option("--max-unacked", f.max_unacked, "frames the server may send ahead of our acknowledgement (1..2)")
+        ->check(CLI::Range(1, 2))
         ->capture_default_str();
     app->add_option("--flight-plan", f.flight_plan, "future poses sent with each request (0..16)")
+        ->check(CLI::Range(0, 16))
         ->capture_default_str();
     app->add_flag("--no-velocity", f.no_velocity, "do not report the path's velocity");
     app->add_option("--rate", f.rate, "poses per second (0: lock step, next pose when a frame arrives)")
+        ->check(bounded_number(0, 1000, "poses per second"))
         ->capture_default_str();
     app->add_flag("--lock-step", f.lock_step,
                   "wait for each frame before sending the next pose, at most --rate per second");

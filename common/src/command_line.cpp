@@ -4,6 +4,7 @@
 #include <iostream>
 
 #include "catgs/common/exit_codes.hpp"
+#include "catgs/constants.hpp"
 #include "catgs/error.hpp"
 #include "catgs/parallel.hpp"
 
@@ -21,6 +22,31 @@ std::optional<int> parse_command_line(CLI::App& app, int argc, char** argv, cons
         return kExitBadInput;
     }
     return std::nullopt;
+}
+
+CLI::Validator image_side() {
+    return CLI::Range(1, kMaxImageSide);
+}
+
+CLI::Validator horizontal_fov() {
+    return CLI::Validator(
+        [](std::string& text) -> std::string {
+            double degrees = 0;
+            if (CLI::detail::lexical_cast(text, degrees) && degrees > 0 && degrees < 180) return {};
+            return "the horizontal field of view must be strictly between 0 and 180 degrees, not " + text;
+        },
+        "degrees in (0, 180)");
+}
+
+CLI::Validator bounded_number(double lo, double hi, const std::string& unit) {
+    const std::string range = "[" + CLI::detail::to_string(lo) + ", " + CLI::detail::to_string(hi) + "]";
+    return CLI::Validator(
+        [lo, hi, unit, range](std::string& text) -> std::string {
+            double value = 0;
+            if (CLI::detail::lexical_cast(text, value) && value >= lo && value <= hi) return {};
+            return "expected " + unit + " in " + range + ", not " + text;
+        },
+        unit + " in " + range);
 }
 
 CLI::Validator thread_count() {

@@ -355,11 +355,11 @@ int main(int argc, char** argv) {
         ->capture_default_str();
     app.add_option("--reference-backend", o.reference_backend, "backend for the reference (default: --backend)");
     app.add_option("--error-every", o.error_every, "compare every Nth frame with the reference")->capture_default_str();
-    app.add_option("--width", o.width, "image width")->capture_default_str()->check(catgs::cli::image_side());
-    app.add_option("--height", o.height, "image height")->capture_default_str()->check(catgs::cli::image_side());
+    app.add_option("--width", o.width, "image width")->capture_default_str()->check(catgs::image_side());
+    app.add_option("--height", o.height, "image height")->capture_default_str()->check(catgs::image_side());
     app.add_option("--fov", o.fov, "horizontal field of view in degrees")
         ->capture_default_str()
-        ->check(catgs::cli::horizontal_fov());
+        ->check(catgs::horizontal_fov());
     app.add_option("--warmup", o.warmup, "untimed renders of the first camera before timing")->capture_default_str();
     app.add_option("--max-frames", o.max_frames, "time at most this many cameras (-1: all)")->capture_default_str();
     app.add_option("--threads", o.threads, "CPU threads for the cpu backend (0: all)")

@@ -265,13 +265,13 @@ int main(int argc, char** argv) {
     app.add_option("--background", o.background, "background colour r,g,b in [0,1]")->capture_default_str();
     app.add_option("--width", o.width, "image width for trajectories")
         ->capture_default_str()
-        ->check(catgs::cli::image_side());
+        ->check(catgs::image_side());
     app.add_option("--height", o.height, "image height for trajectories")
         ->capture_default_str()
-        ->check(catgs::cli::image_side());
+        ->check(catgs::image_side());
     app.add_option("--fov", o.fov, "horizontal field of view in degrees for trajectories")
         ->capture_default_str()
-        ->check(catgs::cli::horizontal_fov());
+        ->check(catgs::horizontal_fov());
     app.add_option("--near", o.near_plane, "near plane (view-space z)")->capture_default_str();
     app.add_option("--threads", o.threads, "CPU threads (0: all)")->check(catgs::thread_count())->capture_default_str();
     app.add_option("--shards", o.shards,

@@ -189,20 +189,6 @@ void add_scene_flags(CLI::App& app, std::string& scene, SpzAxes& spz_axes) {
         ->default_str("rdf");
 }
 
-CLI::Validator image_side() {
-    return CLI::Range(1, kMaxImageSide);
-}
-
-CLI::Validator horizontal_fov() {
-    return CLI::Validator(
-        [](std::string& text) -> std::string {
-            double degrees = 0;
-            if (CLI::detail::lexical_cast(text, degrees) && degrees > 0 && degrees < 180) return {};
-            return "the horizontal field of view must be strictly between 0 and 180 degrees, not " + text;
-        },
-        "degrees in (0, 180)");
-}
-
 std::array<float, 3> parse_background(const std::string& text) {
     std::array<float, 3> rgb{};
     std::stringstream in(text);

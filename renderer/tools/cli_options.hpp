@@ -44,13 +44,6 @@ std::string describe_pipeline(const RenderOptions& o);
 /// data is in: the format has no field for it), as catgs-render and catgs-bench take them.
 void add_scene_flags(CLI::App& app, std::string& scene, SpzAxes& spz_axes);
 
-/// --width and --height: 1..kMaxImageSide, checked as the flags are parsed, before a scene loads.
-CLI::Validator image_side();
-
-/// --fov, the horizontal field of view: strictly between 0 and 180 degrees (at 180 the focal
-/// length is 0), checked as the flag is parsed, before a scene loads.
-CLI::Validator horizontal_fov();
-
 /// catgs-render's --background "r,g,b", each in [0, 1]; throws catgs::Error naming the flag.
 std::array<float, 3> parse_background(const std::string& text);
 

@@ -18,6 +18,20 @@ std::optional<int> parse_command_line(CLI::App& app, int argc, char** argv, cons
 /// Runs `body` and turns what it throws into the one-line error and the exit status above.
 int run_reporting_errors(const char* tool, const std::function<int()>& body);
 
+// Flag values checked as they are parsed, before a scene loads or a connection opens, by
+// every tool that takes them.
+
+/// --width and --height: 1..kMaxImageSide.
+CLI::Validator image_side();
+
+/// --fov, the horizontal field of view: strictly between 0 and 180 degrees (at 180 the focal
+/// length is 0).
+CLI::Validator horizontal_fov();
+
+/// A number in [lo, hi]; NaN is refused too (CLI::Range lets it through). `unit` names the
+/// number in --help and in the message.
+CLI::Validator bounded_number(double lo, double hi, const std::string& unit);
+
 /// A flag counting threads: 0 (as many as the host has cores) to kMaxThreads, checked as it is
 /// parsed.
 CLI::Validator thread_count();
