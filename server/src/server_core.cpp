@@ -202,9 +202,22 @@ void ServerCore::watchdog() {
     }
 }
 
-void ServerCore::add_stream(const std::shared_ptr<StreamSession>& session) {
+int ServerCore::max_streams() const {
+    const std::int64_t all = static_cast<std::int64_t>(admission_.max_sessions()) + kStreamsAwaitingAdmission;
+    return static_cast<int>(std::min<std::int64_t>(all, std::numeric_limits<int>::max()));
+}
+
+grpc::Status ServerCore::add_stream(const std::shared_ptr<StreamSession>& session) {
     std::lock_guard lock(streams_mutex_);
+    const int limit = max_streams();
+    if (static_cast<int>(streams_.size()) >= limit) {
+        streams_refused_++;
+        return {grpc::StatusCode::RESOURCE_EXHAUSTED, "max-streams: " + std::to_string(streams_.size()) +
+                                                          " stream calls are open, the most this server " + "takes (" +
+                                                          std::to_string(limit) + "); finish idle ones or retry later"};
+    }
     streams_.insert(session);
+    return grpc::Status::OK;
 }
 
 void ServerCore::remove_stream(StreamSession* session) {
@@ -239,6 +252,7 @@ ServerStats ServerCore::stats() const {
     s.bytes_buffered = counters_.bytes_buffered;
     s.peak_session_buffered = counters_.peak_session_buffered;
     s.streams_stalled = counters_.streams_stalled;
+    s.streams_refused = streams_refused_;
     s.open_timeouts = counters_.open_timeouts;
     s.reads_delayed = counters_.reads_delayed;
     s.out_of_memory = counters_.out_of_memory;

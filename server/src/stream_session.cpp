@@ -63,12 +63,14 @@ StreamSession::~StreamSession() {
 
 void StreamSession::start() {
     self_ = shared_from_this();
-    core_.add_stream(self_);
+    const grpc::Status added = core_.add_stream(self_);
     Actions actions;
     bool read = false;
     {
         std::lock_guard lock(mutex_);
-        if (grpc::Status auth = core_.authorize(context_); !auth.ok())
+        if (!added.ok())
+            request_finish_locked(added);
+        else if (grpc::Status auth = core_.authorize(context_); !auth.ok())
             request_finish_locked(auth);
         else if (core_.admission().draining())
             request_finish_locked(shutting_down_status());
@@ -103,6 +105,7 @@ void StreamSession::OnReadDone(bool ok) {
                 request_finish_locked({grpc::StatusCode::INVALID_ARGUMENT,
                                        "open: the stream ended before its opening message (StreamRequest.open)"});
         } else if (!ending_locked()) {
+            message_read_ = true;
             request_.Clear();
             if (!parse_message(request_buffer_, &request_)) {
                 // Not a half-close: the client (or something on the path) sent bytes we cannot
@@ -342,7 +345,12 @@ void StreamSession::OnDone() {
     {
         std::lock_guard lock(mutex_);
         const double frames = static_cast<double>(stats_.frames_sent);
-        spdlog::info(
+        // A call that sent nothing (refused at max-streams, ended by the open timeout, one of a
+        // flood of idle calls) is logged at debug: a hostile client must not fill the log.
+        // ServerStats counts those.
+        const auto level = message_read_ ? spdlog::level::info : spdlog::level::debug;
+        spdlog::log(
+            level,
             "session {} closed: {} '{}' after {:.1f} s; {} requests, {} frames ({:.1f}/s), {} poses and {} "
             "frames coalesced, {} re-sent for a repeated pose, {} errors, render {:.1f} ms, encode {:.1f} ms (means)",
             id_, static_cast<int>(finish_status_.error_code()), finish_status_.error_message(), seconds,

@@ -262,5 +262,37 @@ TEST(ServerLimits, UnaryRendersReuseRenderers) {
     EXPECT_LE(server->stats().pooled_renderers, 2);
 }
 
+/// A flood of stream calls that never open is bounded: past max_streams() calls alive, a new
+/// call ends at once with RESOURCE_EXHAUSTED naming the limit; once the idle calls end, a
+/// stream opens and renders again.
+TEST(ServerLimits, StreamCallsBeyondTheLimitAreRefusedByName) {
+    auto server = start_server();
+    const int limit = server::kStreamsAwaitingAdmission + test_options().limits.max_sessions;  // one device
+    auto channel = channel_to(server->port());
+    std::vector<std::unique_ptr<StreamClient>> idle;
+    for (int i = 0; i < limit; ++i) idle.push_back(std::make_unique<StreamClient>(channel));
+    ASSERT_TRUE(eventually([&] { return server->stats().streams_open == limit; }, std::chrono::seconds(30)))
+        << server->stats().streams_open;
+
+    StreamClient refused(channel);
+    const grpc::Status status = refused.finish();
+    EXPECT_EQ(status.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED) << status.error_message();
+    EXPECT_EQ(status.error_message(), "max-streams: " + std::to_string(limit) +
+                                          " stream calls are open, the most this server takes (" +
+                                          std::to_string(limit) + "); finish idle ones or retry later");
+    EXPECT_EQ(server->stats().streams_refused, 1u);
+
+    for (auto& call : idle) call->context.TryCancel();
+    idle.clear();
+    ASSERT_TRUE(eventually([&] { return server->stats().streams_open == 0; }, std::chrono::seconds(30)));
+    StreamClient client(channel);
+    ASSERT_TRUE(client.open(session_config(v1::ENCODING_JPEG)));
+    ASSERT_TRUE(client.send(frame_request(1, uav_path(2)[0], 0)));
+    v1::Frame frame;
+    ASSERT_TRUE(client.stream->Read(&frame));
+    EXPECT_FALSE(frame.has_error()) << frame.error().message();
+    EXPECT_TRUE(client.close().ok());
+}
+
 }  // namespace
 }  // namespace catgs::test

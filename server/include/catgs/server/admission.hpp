@@ -64,6 +64,8 @@ public:
         Admission* owner_;
     };
 
+    int max_sessions() const { return max_sessions_; }
+
     /// A ticket, or a status: UNAVAILABLE while draining, RESOURCE_EXHAUSTED at the limit.
     grpc::Status admit(std::unique_ptr<Ticket>* ticket) {
         std::lock_guard lock(mutex_);

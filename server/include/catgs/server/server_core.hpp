@@ -78,6 +78,7 @@ struct ServerStats {
     std::uint64_t open_timeouts = 0;         ///< streams finished for sending no opening message in time
     std::uint64_t reads_delayed = 0;         ///< reads postponed by the pose-rate limit
     std::uint64_t out_of_memory = 0;         ///< sessions and loads refused for memory
+    std::uint64_t streams_refused = 0;       ///< stream calls refused at ServerCore::max_streams
     int pooled_renderers = 0;                ///< idle renderers kept for unary renders (gauge)
 };
 
@@ -101,6 +102,12 @@ inline constexpr int kMinEncodeWorkers = 2;
 WorkerCounts auto_worker_counts(const std::string& backend, int cores, int max_sessions, int devices = 1);
 /// What --help says 0 means, in the terms above.
 std::string auto_worker_counts_help();
+
+/// Stream calls the server keeps alive beyond its session slots: clients reconnecting, refused
+/// or finishing, and calls that have not sent their opening message yet (each ended by the
+/// open timeout). Far above what viewers need; it bounds what a flood of idle calls can hold
+/// (measured: 3000 idle calls on one connection, +129 MB with the client's share).
+inline constexpr int kStreamsAwaitingAdmission = 1024;
 
 class StreamSession;
 
@@ -136,7 +143,13 @@ public:
     void release_unary_renderer(std::unique_ptr<Renderer> renderer, const std::shared_ptr<const Scene>& scene,
                                 const DevicePlacement::Seat& seat);
 
-    void add_stream(const std::shared_ptr<StreamSession>& session);
+    /// Registers a new stream call, or refuses it (RESOURCE_EXHAUSTED "max-streams: ...") when
+    /// max_streams() calls are alive already.
+    grpc::Status add_stream(const std::shared_ptr<StreamSession>& session);
+    /// Stream calls alive at once, admitted or not: every session slot plus
+    /// kStreamsAwaitingAdmission. Each call costs buffers (about 20 KB on the server) until it
+    /// ends, and a client may start thousands before the open timeout ends any of them.
+    int max_streams() const;
     void remove_stream(StreamSession* session);
     std::vector<std::shared_ptr<StreamSession>> streams() const;
 
@@ -175,6 +188,7 @@ private:
     WorkerPool admin_pool_;  ///< scene loads: slow, kept off the render workers
     mutable std::mutex streams_mutex_;
     std::set<std::shared_ptr<StreamSession>> streams_;
+    std::atomic<std::uint64_t> streams_refused_{0};
 
     struct PooledRenderer {
         std::shared_ptr<const Scene> scene;

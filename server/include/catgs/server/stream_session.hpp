@@ -195,6 +195,7 @@ private:
     std::uint64_t last_ack_ = 0;
     std::deque<std::uint64_t> unacked_;  // frames rendered (or rendering) and not acknowledged
     bool reads_done_ = false;            // the client half-closed (or the call broke)
+    bool message_read_ = false;          // any message arrived, valid or not
     bool render_busy_ = false;           // a render task is queued or running
     int encoding_ = 0;                   // frames being rendered for encoding, or encoded
 
