@@ -65,7 +65,8 @@ double elapsed_ms(Clock::time_point since) {
 }  // namespace
 
 template <typename T>
-CpuRenderer<T>::CpuRenderer(int threads) : threads_(threads > 0 ? threads : default_thread_count()) {}
+CpuRenderer<T>::CpuRenderer(int threads, CpuLimits limits)
+    : threads_(threads > 0 ? threads : default_thread_count()), limits_(limits) {}
 
 template <typename T>
 void CpuRenderer<T>::reset_cache() {
@@ -98,6 +99,13 @@ FrameStats CpuRenderer<T>::render_frame(const Scene& scene, const Camera& camera
     stats.order_reused = !plan.key && !plan.resort;
     const auto start = Clock::now();
     auto t = Clock::now();
+    tiles_y_ = view.tiles_y;
+    band_ = TileRows{};
+    if (out.image)
+        out.image->resize(view.width, view.height);
+    else
+        out.partial->resize(view.width, view.height);
+    bool drawn = false;  // a banded frame rasterizes band by band
     if (plan.key) {
         // The window: every pose projected with the near plane lowered by the translation
         // guard and footprints dilated by the pixel guard, so a pose inside the envelope
@@ -114,23 +122,29 @@ FrameStats CpuRenderer<T>::render_frame(const Scene& scene, const Camera& camera
         t = Clock::now();
         preprocess(scene, view, window, options.culling);
         stats.stage_ms[Stage::preprocess] = elapsed_ms(t);
-        t = Clock::now();
-        keys(scene, window, options.culling);
-        // Cached frames that re-sort re-key from the pairs in emission (Gaussian) order
-        // (rekey); with the depth order reused they never read them.
-        if (plan.keep_emission_order) {
-            emitted_keys_ = keys_;
-            emitted_values_ = values_;
+        if (needs_bands(options.culling)) {
+            render_bands(scene, view, window, options, plan.split, out, stats);
+            planner_.invalidate();  // a banded frame keeps no whole-frame lists to cache
+            drawn = true;
         } else {
-            emitted_keys_.clear();
-            emitted_values_.clear();
+            t = Clock::now();
+            keys(scene, window, options.culling);
+            // Cached frames that re-sort re-key from the pairs in emission (Gaussian) order
+            // (rekey); with the depth order reused they never read them.
+            if (plan.keep_emission_order) {
+                emitted_keys_ = keys_;
+                emitted_values_ = values_;
+            } else {
+                emitted_keys_.clear();
+                emitted_values_.clear();
+            }
+            stats.stage_ms[Stage::keys] = elapsed_ms(t);
+            sort_and_schedule(view, options, plan.split, stats);
+            if (frame_cache != CacheMode::off)
+                planner_.key_rendered(plan, summarize(scene, window, options.culling));
+            else
+                planner_.invalidate();
         }
-        stats.stage_ms[Stage::keys] = elapsed_ms(t);
-        sort_and_schedule(view, options, plan.split, stats);
-        if (frame_cache != CacheMode::off)
-            planner_.key_rendered(plan, summarize(scene, window, options.culling));
-        else
-            planner_.invalidate();
     } else {
         reproject(scene, view);
         stats.stage_ms[Stage::preprocess] = elapsed_ms(t);
@@ -141,16 +155,18 @@ FrameStats CpuRenderer<T>::render_frame(const Scene& scene, const Camera& camera
             sort_and_schedule(view, options, plan.split, stats);
         }
     }
-    t = Clock::now();
-    rasterize(view, options, out);
-    stats.stage_ms[Stage::rasterize] = elapsed_ms(t);
-    t = Clock::now();
-    merge(view, options, out);
-    stats.stage_ms[Stage::merge] = elapsed_ms(t);
+    if (!drawn) {
+        t = Clock::now();
+        rasterize(view, options, out);
+        stats.stage_ms[Stage::rasterize] = elapsed_ms(t);
+        t = Clock::now();
+        merge(view, options, out);
+        stats.stage_ms[Stage::merge] = elapsed_ms(t);
+        stats.pairs = rendered_pairs_;
+        stats.tasks = tasks_.size();
+        stats.split_tasks = split_tasks_;
+    }
     stats.total_ms = elapsed_ms(start);
-    stats.pairs = rendered_pairs_;
-    stats.tasks = tasks_.size();
-    stats.split_tasks = tasks_.size() - ranges_.size();
     stats.split_k = split_k_;
     stats.chunks = scene.chunks.size();
     stats.chunks_culled = chunks_culled_;
@@ -165,12 +181,13 @@ FrameStats CpuRenderer<T>::render_frame(const Scene& scene, const Camera& camera
 template <typename T>
 void CpuRenderer<T>::sort_and_schedule(const View<T>& view, const RenderOptions& options, bool may_split,
                                        FrameStats& stats) {
+    // Accumulated: a banded frame runs these once per band.
     auto t = Clock::now();
     sort(view);
-    stats.stage_ms[Stage::sort] = elapsed_ms(t);
+    stats.stage_ms[Stage::sort] += elapsed_ms(t);
     t = Clock::now();
     ranges(view, options.culling);
-    stats.stage_ms[Stage::ranges] = elapsed_ms(t);
+    stats.stage_ms[Stage::ranges] += elapsed_ms(t);
     t = Clock::now();
     CatgsOptions split_options = options.catgs;
     if (!may_split) {  // the planner measured that splitting does not pay here (SplitChooser)
@@ -178,7 +195,7 @@ void CpuRenderer<T>::sort_and_schedule(const View<T>& view, const RenderOptions&
         split_options.split_auto = false;
     }
     split_k_ = split(split_options);
-    stats.stage_ms[Stage::split] = elapsed_ms(t);
+    stats.stage_ms[Stage::split] += elapsed_ms(t);
 }
 
 template <typename T>
@@ -296,16 +313,32 @@ void CpuRenderer<T>::reproject(const Scene& scene, const View<T>& actual) {
 }
 
 // Exclusive scan of the tile counts (64-bit; the scan stage, folded in here), then emit
-// (tile | depth) keys in Gaussian order through the same predicate the count used.
+// (tile | depth) keys in Gaussian order through the same predicate the count used. A band
+// counts its own rows first (the same predicate, restricted to them).
 template <typename T>
 void CpuRenderer<T>::keys(const Scene& scene, const Window& window, Culling culling) {
     const std::size_t n = tiles_touched_.size();
     const int w = static_cast<int>(window.views.size());
     offsets_.resize(n);
+    if (banded()) {
+        parallel_for(n, kGaussianGrain, threads_, [&](std::size_t begin, std::size_t end) {
+            Projected<T> poses[kMaxWindow];
+            for (std::size_t i = begin; i < end; ++i) {
+                offsets_[i] = 0;
+                if (tiles_touched_[i] == 0) continue;
+                const std::uint32_t valid = project_window(scene, i, window, poses);
+                offsets_[i] = for_each_window_tile<kMaxWindow>(
+                    poses, valid, w, culling, window.guard, window.views[0], [](std::uint32_t) {}, band_);
+            }
+        });
+    } else {
+        for (std::size_t i = 0; i < n; ++i) offsets_[i] = tiles_touched_[i];
+    }
     std::uint64_t total = 0;
     for (std::size_t i = 0; i < n; ++i) {
+        const std::uint64_t count = offsets_[i];
         offsets_[i] = total;
-        total += tiles_touched_[i];
+        total += count;
     }
     keys_.resize(total);
     values_.resize(total);
@@ -315,12 +348,14 @@ void CpuRenderer<T>::keys(const Scene& scene, const Window& window, Culling cull
             if (tiles_touched_[i] == 0) continue;
             std::uint64_t slot = offsets_[i];
             const std::uint32_t valid = project_window(scene, i, window, poses);
-            for_each_window_tile<kMaxWindow>(poses, valid, w, culling, window.guard, window.views[0],
-                                             [&](std::uint32_t tile) {
-                                                 keys_[slot] = make_sort_key(tile, sort_depth_[i]);
-                                                 values_[slot] = static_cast<std::uint32_t>(i);
-                                                 ++slot;
-                                             });
+            for_each_window_tile<kMaxWindow>(
+                poses, valid, w, culling, window.guard, window.views[0],
+                [&](std::uint32_t tile) {
+                    keys_[slot] = make_sort_key(tile, sort_depth_[i]);
+                    values_[slot] = static_cast<std::uint32_t>(i);
+                    ++slot;
+                },
+                band_);
         }
     });
 }
@@ -416,16 +451,23 @@ std::uint32_t CpuRenderer<T>::split(const CatgsOptions& options) {
         const double mean = nonempty ? static_cast<double>(pairs) / static_cast<double>(nonempty) : 0.0;
         k = std::max(kAutoSplitFloor, static_cast<std::uint32_t>(std::ceil(kAutoSplitFactor * mean)));
     }
-    const std::size_t tiles = ranges_.size();
-    tasks_.resize(tiles);
+    // The tiles of the band (all of them unless the frame is banded), then the extra sub-tasks.
+    const std::uint32_t tiles = static_cast<std::uint32_t>(ranges_.size());
+    const std::uint32_t tiles_x = tiles_y_ > 0 ? tiles / static_cast<std::uint32_t>(tiles_y_) : tiles;
+    const std::uint32_t first = static_cast<std::uint32_t>(std::max(band_.begin, 0)) * tiles_x;
+    const std::uint32_t last = static_cast<std::uint32_t>(
+        std::min<std::uint64_t>(tiles, std::uint64_t{tiles_x} * std::min(band_.end, tiles_y_)));
+    tasks_.clear();
     split_slot_.assign(tiles, kNoSlot);
+    for (std::uint32_t t = first; t < last; ++t) tasks_.push_back({t, 0});
     std::uint32_t slots = 0;
-    for (std::uint32_t t = 0; t < tiles; ++t) {
-        tasks_[t] = {t, 0};
+    split_tasks_ = 0;
+    for (std::uint32_t t = first; t < last; ++t) {
         const std::uint32_t splits = split_count(ranges_[t].end - ranges_[t].begin, k);
         if (splits == 0) continue;
         split_slot_[t] = slots;
         slots += splits + 1;
+        split_tasks_ += splits;
         for (std::uint32_t i = 1; i <= splits; ++i) tasks_.push_back({t, i});
     }
     partials_.resize(static_cast<std::size_t>(slots) * kTilePixels);
@@ -436,10 +478,6 @@ std::uint32_t CpuRenderer<T>::split(const CatgsOptions& options) {
 // split writes its pixels; a sub-task of a split tile writes (R, A) to its partial slot.
 template <typename T>
 void CpuRenderer<T>::rasterize(const View<T>& view, const RenderOptions& options, const FrameOutput& out) {
-    if (out.image)
-        out.image->resize(view.width, view.height);
-    else
-        out.partial->resize(view.width, view.height);
     const Vec3<T> background{static_cast<T>(options.background[0]), static_cast<T>(options.background[1]),
                              static_cast<T>(options.background[2])};
     const T tail_threshold = static_cast<T>(options.catgs.split_tail_transmittance);

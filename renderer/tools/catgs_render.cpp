@@ -101,12 +101,14 @@ void print_frame(std::size_t i, const catgs::FrameStats& s, const catgs::Sharded
                       std::string(catgs::stage_name(stage)).c_str(), s.stage_ms[stage]);
         stages += part;
     }
-    char shard_part[64] = "";
+    char shard_part[64] = "", band_part[32] = "";
     if (sharded) std::snprintf(shard_part, sizeof shard_part, "  shard merge %.2f ms", sharded->merge_ms);
-    std::printf("frame %5zu %s W=%-2d %8.2f ms  (%s)  visible %llu  pairs %llu  splits %llu%s\n", i,
+    // Over the renderer's pair budget the frame was drawn in bands of tile rows.
+    if (s.bands > 1) std::snprintf(band_part, sizeof band_part, "  bands %d", s.bands);
+    std::printf("frame %5zu %s W=%-2d %8.2f ms  (%s)  visible %llu  pairs %llu  splits %llu%s%s\n", i,
                 s.key_frame ? "key   " : "cached", s.window, s.total_ms, stages.c_str(),
                 static_cast<unsigned long long>(s.visible), static_cast<unsigned long long>(s.pairs),
-                static_cast<unsigned long long>(s.split_tasks), shard_part);
+                static_cast<unsigned long long>(s.split_tasks), band_part, shard_part);
     std::fflush(stdout);
 }
 

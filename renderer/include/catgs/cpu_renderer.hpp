@@ -22,6 +22,7 @@
 #include "catgs/scene.hpp"
 #include "catgs/stages/project.hpp"
 #include "catgs/stages/split.hpp"
+#include "catgs/stages/tiles.hpp"
 
 namespace catgs {
 
@@ -36,11 +37,19 @@ struct TileTask {
     std::uint32_t tile = 0, index = 0;
 };
 
+/// What one CpuRenderer may hold.
+struct CpuLimits {
+    /// Tile-Gaussian pairs one pass of keys, sort and rasterize may hold (0: auto, a share of
+    /// the host's memory, CpuRenderer::pair_budget). A frame with more is rendered in bands of
+    /// tile rows (FrameStats::bands), as the GPU renders its own.
+    std::uint64_t max_pairs = 0;
+};
+
 template <typename T>
 class CpuRenderer {
 public:
     /// threads <= 0 uses every hardware thread.
-    explicit CpuRenderer(int threads = 0);
+    explicit CpuRenderer(int threads = 0, CpuLimits limits = {});
 
     /// Renders one frame into `out` (resized to the camera's image). Throws catgs::Error on
     /// invalid intrinsics. `hints` may carry the client's flight plan or velocity.
@@ -54,6 +63,10 @@ public:
 
     /// Forgets the inter-frame cache and the pose history (a new stream or a new scene).
     void reset_cache();
+
+    /// The pairs one pass may hold: CpuLimits::max_pairs, or with 0 kAutoPairMemoryShare of the
+    /// host's physical memory at kBytesPerPair (sort buffers and a window's kept pairs included).
+    std::uint64_t pair_budget() const;
 
     // Stage outputs of the last frame, for tests and tools.
     const std::vector<Projected<T>>& projected() const { return projected_; }
@@ -97,12 +110,24 @@ private:
     void merge(const View<T>& view, const RenderOptions& options, const FrameOutput& out);
     KeyFrameSummary summarize(const Scene& scene, const Window& window, Culling culling) const;
 
+    /// Over the pair budget (cpu_renderer_bands.cpp): the tile rows split so that each band's
+    /// pairs fit, then keys -> sort -> ranges -> split -> rasterize -> merge per band.
+    bool needs_bands(Culling culling) const;
+    std::vector<TileRows> plan_bands(const Scene& scene, const Window& window, Culling culling) const;
+    void render_bands(const Scene& scene, const View<T>& view, const Window& window, const RenderOptions& options,
+                      bool may_split, const FrameOutput& out, FrameStats& stats);
+    bool banded() const { return band_.begin > 0 || band_.end < tiles_y_; }
+
     /// Projects Gaussian i against every pose of the window into `poses`; returns the mask of
     /// poses where it is visible. Shared by the count and the emit pass.
     std::uint32_t project_window(const Scene& scene, std::size_t i, const Window& window, Projected<T>* poses) const;
 
     int threads_;
+    CpuLimits limits_;
     FramePlanner planner_;
+    int tiles_y_ = 0;                                        // the frame's tile rows
+    TileRows band_;                                          // keys, split: the rows of this pass
+    std::uint64_t split_tasks_ = 0;                          // split: extra sub-tasks of this pass
     std::uint32_t split_k_ = 0;                              // k of the current task list
     std::vector<std::pair<std::size_t, std::size_t>> runs_;  // chunk_cull: [begin, end) of Gaussians to preprocess
     std::uint64_t chunks_culled_ = 0;                        // chunk_cull: chunks the key frame skipped

@@ -80,7 +80,7 @@ struct FrameStats {
     std::uint64_t chunks = 0;         ///< the scene's chunks (1 per kChunkGaussians; 0 if unpartitioned)
     std::uint64_t chunks_culled = 0;  ///< chunks a key frame skipped whole (cached frames: the key's)
     std::uint64_t arena_bytes = 0;    ///< device memory held by the renderer's arenas (GPU)
-    int bands = 1;                    ///< horizontal bands the frame was rendered in (GPU overflow path)
+    int bands = 1;                    ///< horizontal bands the frame was rendered in (over the pair budget)
     bool key_frame = true;            ///< false: drawn from the inter-frame cache
     int window = 1;                   ///< W of the window this frame belongs to
     bool order_reused = false;        ///< cached frame drawn in the key frame's depth order (not re-sorted)
