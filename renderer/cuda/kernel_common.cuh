@@ -28,7 +28,7 @@ struct DeviceSceneView {
     const float* scales;
     const float* rotations;
     const float* opacities;
-    const float* sh;
+    const float* sh;  // 16-byte aligned (preprocess reads degree-3 rows as float4)
     int sh_degree;
     std::uint64_t count;
 };

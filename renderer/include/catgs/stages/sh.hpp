@@ -21,14 +21,11 @@ inline constexpr double kShC3d = 0.3731763325901154;   // z(2z^2 - 3x^2 - 3y^2)
 inline constexpr double kShC3e = 1.445305721320277;    // z(x^2 - y^2)
 
 /// Colour of one Gaussian seen along `dir` (unit vector from the camera centre to the
-/// Gaussian). `coefficients` holds sh_coefficient_count(degree) RGB triples, DC first.
-/// Returns sum(basis * coefficient) + 0.5, clamped at >= 0 (not above: output clamps).
-template <typename T>
-CATGS_HD Vec3<T> sh_colour(const float* coefficients, int degree, Vec3<T> dir) {
-    auto coeff = [&](int k) {
-        return Vec3<T>{static_cast<T>(coefficients[3 * k]), static_cast<T>(coefficients[3 * k + 1]),
-                       static_cast<T>(coefficients[3 * k + 2])};
-    };
+/// Gaussian), with coefficient k (an RGB triple, DC first) read as coeff(k), k below
+/// sh_coefficient_count(degree). Returns sum(basis * coefficient) + 0.5, clamped at >= 0 (not
+/// above: output clamps).
+template <typename T, typename Coefficient>
+CATGS_HD Vec3<T> sh_colour_of(Coefficient coeff, int degree, Vec3<T> dir) {
     Vec3<T> c = static_cast<T>(kShC0) * coeff(0);
     if (degree > 0) {
         const T x = dir.x, y = dir.y, z = dir.z;
@@ -56,6 +53,17 @@ CATGS_HD Vec3<T> sh_colour(const float* coefficients, int degree, Vec3<T> dir) {
     const T top = static_cast<T>(kMaxShColour);
     auto clamp = [top](T v) { return v > T(0) ? (v < top ? v : top) : T(0); };
     return {clamp(c.x + offset), clamp(c.y + offset), clamp(c.z + offset)};
+}
+
+/// sh_colour_of from sh_coefficient_count(degree) RGB triples stored in order.
+template <typename T>
+CATGS_HD Vec3<T> sh_colour(const float* coefficients, int degree, Vec3<T> dir) {
+    return sh_colour_of<T>(
+        [coefficients](int k) {
+            return Vec3<T>{static_cast<T>(coefficients[3 * k]), static_cast<T>(coefficients[3 * k + 1]),
+                           static_cast<T>(coefficients[3 * k + 2])};
+        },
+        degree, dir);
 }
 
 }  // namespace catgs
