@@ -23,16 +23,12 @@ template <typename T>
 constexpr int kSingleMinBlocks = sizeof(T) == 4 ? 3 : 1;
 constexpr int kSummarizeThreads = 128;
 
-// Counts the tiles of the union of each Gaussian's footprints over the window
-// (MaxWindow = 1: the plain single-frame pipeline) and projects it at the actual pose for
-// rasterizing (opacity 0 when culled there). Key frames of the cache also reduce what the
-// planner needs: nearest depth, mean inverse depth, largest footprint.
 // The SH colour of a Gaussian that touches a tile. At degree 3 its 48 coefficients (192 bytes,
 // 16-byte aligned in DeviceScene's own allocation) are fetched as 12 float4 loads instead of 48
 // scalar ones: a warp's scalar loads at a 192-byte stride each touched 32 sectors for 128 useful
 // bytes. Preprocess on the kit's city_ring (SH 3) fell from 0.80 to 0.61 ms at 1080p and 0.84 to
-// 0.66 at 4K, DRAM throughput 27% -> 37% (H200, 2026-12-03); other degrees keep the scalar loads
-// (degree 0 and 2 rows are not 16-byte multiples).
+// 0.66 at 4K, DRAM throughput 27% -> 37% (H200, 2026-12-03). Other degrees keep the scalar
+// loads: rows of degree 0 and 2 are not 16-byte multiples, and degree 1 has only 12 floats.
 template <typename T>
 __device__ void shade_visible(const GaussianRef& g, const View<T>& view, Projected<T>& p) {
     if (g.sh_degree == 3 && reinterpret_cast<std::uintptr_t>(g.sh) % alignof(float4) == 0) {
@@ -52,6 +48,10 @@ __device__ void shade_visible(const GaussianRef& g, const View<T>& view, Project
     }
 }
 
+// Counts the tiles of the union of each Gaussian's footprints over the window
+// (MaxWindow = 1: the plain single-frame pipeline) and projects it at the actual pose for
+// rasterizing (opacity 0 when culled there). Key frames of the cache also reduce what the
+// planner needs: nearest depth, mean inverse depth, largest footprint.
 template <typename T, int MaxWindow, bool Summarize, int Threads, int MinBlocks>
 __global__ void __launch_bounds__(Threads, MinBlocks)
     preprocess_kernel(DeviceSceneView scene, ChunkSpace space, const View<T>* views, int window, View<T> actual,
