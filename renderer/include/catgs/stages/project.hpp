@@ -114,27 +114,27 @@ CATGS_HD bool project_geometry(const GaussianRef& g, const View<T>& view, Projec
            is_finite(out.conic.z);
 }
 
+/// The unit direction from the view's camera centre to the Gaussian, along which its SH colour
+/// is seen (+z when they coincide).
+template <typename T>
+CATGS_HD Vec3<T> view_direction(const GaussianRef& g, const View<T>& view) {
+    const Vec3<T> p{static_cast<T>(g.position[0]), static_cast<T>(g.position[1]), static_cast<T>(g.position[2])};
+    const Vec3<T> dir = p - view.centre;
+    const T len = sqrt_of(dot(dir, dir));
+    return len > T(0) ? (T(1) / len) * dir : Vec3<T>{T(0), T(0), T(1)};
+}
+
 /// The SH colour of a Gaussian seen from the view's camera centre, its coefficient k read as
-/// coeff(k) (sh_colour_of).
+/// coeff(k) (sh_colour_of): for a caller that fetches the coefficients its own way.
 template <typename T, typename Coefficient>
 CATGS_HD void shade_gaussian_with(const GaussianRef& g, Coefficient coeff, const View<T>& view, Projected<T>& out) {
-    const Vec3<T> p{static_cast<T>(g.position[0]), static_cast<T>(g.position[1]), static_cast<T>(g.position[2])};
-    Vec3<T> dir = p - view.centre;
-    const T len = sqrt_of(dot(dir, dir));
-    dir = len > T(0) ? (T(1) / len) * dir : Vec3<T>{T(0), T(0), T(1)};
-    out.colour = sh_colour_of<T>(coeff, g.sh_degree, dir);
+    out.colour = sh_colour_of<T>(coeff, g.sh_degree, view_direction(g, view));
 }
 
 /// The SH colour of a Gaussian seen from the view's camera centre.
 template <typename T>
 CATGS_HD void shade_gaussian(const GaussianRef& g, const View<T>& view, Projected<T>& out) {
-    const float* sh = g.sh;
-    shade_gaussian_with(
-        g,
-        [sh](int k) {
-            return Vec3<T>{static_cast<T>(sh[3 * k]), static_cast<T>(sh[3 * k + 1]), static_cast<T>(sh[3 * k + 2])};
-        },
-        view, out);
+    out.colour = sh_colour<T>(g.sh, g.sh_degree, view_direction(g, view));
 }
 
 /// Geometry and colour: everything the rasterizer needs of one Gaussian.
