@@ -1,13 +1,16 @@
 // The rules around the stage math that both backends share: how many key bits a sort needs,
 // the clamp region that bounds the envelope, the per-Gaussian key-frame summary bound, the
-// frame planner's near plane and its cached-to-key rule, and the CPU's partials of split tiles.
+// frame planner's near plane and its cached-to-key rule, the straight-line blend, and the CPU's
+// partials of split tiles.
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <array>
 #include <bit>
 #include <cmath>
 #include <cstdint>
 #include <limits>
+#include <random>
 
 #include "catgs/cache.hpp"
 #include "catgs/cpu_renderer.hpp"
@@ -17,6 +20,7 @@
 #include "catgs/stages/keys.hpp"
 #include "catgs/stages/split.hpp"
 #include "catgs/stages/view.hpp"
+#include "stage_inputs.hpp"
 #include "test_util.hpp"
 
 namespace catgs {
@@ -165,6 +169,82 @@ TEST(FramePlanner, ACachedFrameThatWouldResortWithoutTheEmissionOrderIsAKeyFrame
     EXPECT_TRUE(planner.next(at(0.005, 5 / 30.0), resort).key);
 }
 
+// graphdeco's per-pixel rule as plain branches, the way its renderer reads: skip a power
+// above 0 or an alpha below 1/255, clamp alpha at 0.99, stop (drawing nothing) where T would
+// fall below the threshold. blend_power_unless_done is the same rule as straight-line code.
+template <typename T>
+void branchy_blend(PixelAccumulator<T>& acc, T power, T opacity, Vec3<T> c, T min_t) {
+    if (acc.done) return;
+    if (!(power <= T(0))) return;
+    T alpha = opacity * std::exp(power);
+    if (!(alpha >= static_cast<T>(kMinAlpha))) return;
+    if (alpha > static_cast<T>(kMaxAlpha)) alpha = static_cast<T>(kMaxAlpha);
+    const T next = acc.transmittance * (T(1) - alpha);
+    if (next < min_t) {
+        acc.done = true;
+        return;
+    }
+    const T w = alpha * acc.transmittance;
+    acc.colour = {acc.colour.x + c.x * w, acc.colour.y + c.y * w, acc.colour.z + c.z * w};
+    acc.transmittance = next;
+}
+
+template <typename T>
+void check_straight_line_blend(const char* name) {
+    std::mt19937_64 rng(test::fresh_seed(name));
+    std::uniform_real_distribution<T> unit(T(0), T(1));
+    const T inf = std::numeric_limits<T>::infinity(), nan = std::numeric_limits<T>::quiet_NaN();
+    // Powers around the tests' edges: 0 and just above it, where opacity * e^power crosses 1/255
+    // and 0.99, and the non-finite values an off-screen mean produces.
+    auto power_of = [&](T opacity) -> T {
+        switch (rng() % 8) {
+            case 0:
+                return T(0);
+            case 1:
+                return std::nextafter(T(0), T(1));
+            case 2:
+                return std::log(static_cast<T>(kMinAlpha) / opacity) * (T(1) + (unit(rng) - T(0.5)) * T(1e-6));
+            case 3:
+                return std::log(static_cast<T>(kMaxAlpha) / opacity);
+            case 4:
+                return std::array<T, 3>{nan, inf, -inf}[rng() % 3];
+            default:
+                return -T(8) * unit(rng);
+        }
+    };
+    int drawn = 0, stopped = 0, refused = 0;
+    for (int pixel = 0; pixel < 2000; ++pixel) {
+        PixelAccumulator<T> straight, branchy;
+        const T min_t = rng() % 2 ? static_cast<T>(kMinTransmittance) : T(0.3) * unit(rng);
+        for (int g = 0; g < 40; ++g) {
+            const T opacity = rng() % 10 == 0 ? T(0) : unit(rng);
+            const T power = power_of(opacity);
+            const Vec3<T> c{unit(rng), T(4) * unit(rng), unit(rng)};
+            const PixelAccumulator<T> before = branchy;
+            blend_power_unless_done(straight, power, opacity, c, min_t, [](T v) { return std::exp(v); });
+            branchy_blend(branchy, power, opacity, c, min_t);
+            ASSERT_EQ(straight.done, branchy.done) << name << " pixel " << pixel << " gaussian " << g;
+            ASSERT_TRUE(test::stage::same_bits(straight.transmittance, branchy.transmittance))
+                << name << " pixel " << pixel;
+            ASSERT_TRUE(test::stage::same_bits(straight.colour.x, branchy.colour.x)) << name << " pixel " << pixel;
+            ASSERT_TRUE(test::stage::same_bits(straight.colour.y, branchy.colour.y)) << name << " pixel " << pixel;
+            ASSERT_TRUE(test::stage::same_bits(straight.colour.z, branchy.colour.z)) << name << " pixel " << pixel;
+            drawn += branchy.transmittance != before.transmittance;
+            stopped += branchy.done && !before.done;
+            refused += !before.done && branchy.transmittance == before.transmittance && !branchy.done;
+        }
+    }
+    // Every branch of the rule was taken, or the comparison proves little.
+    EXPECT_GT(drawn, 1000) << name;
+    EXPECT_GT(stopped, 100) << name;
+    EXPECT_GT(refused, 1000) << name;
+}
+
+TEST(Blend, StraightLineCodeIsGraphdecosBranchyRule) {
+    check_straight_line_blend<float>("blend-float");
+    check_straight_line_blend<double>("blend-double");
+}
+
 TEST(CpuRendererPartials, MergeToTheSplitTilesPixels) {
     const Scene scene = test::random_scene(test::fresh_seed("partials"));
     const Camera camera = test::forward_camera(64, 48, 60.0);
@@ -173,7 +253,7 @@ TEST(CpuRendererPartials, MergeToTheSplitTilesPixels) {
     o.background = {0.25f, 0.5f, 0.75f};
     CpuRenderer<double> r(2);
     ImageF out;
-    r.render(scene, camera, o, out);
+    const FrameStats stats = r.render(scene, camera, o, out);
     const View<double> view = make_view<double>(camera, scene.origin);
     const Vec3<double> background{0.25, 0.5, 0.75};
     int split_tiles = 0;
@@ -207,6 +287,13 @@ TEST(CpuRendererPartials, MergeToTheSplitTilesPixels) {
             }
     }
     EXPECT_GT(split_tiles, 0);
+    // The longest list, split or not: what the GPU's layout choice reads.
+    std::uint64_t longest_list = 0;
+    for (const TileRange& range : r.tile_ranges()) longest_list = std::max(longest_list, range.end - range.begin);
+    EXPECT_GT(longest_list, o.catgs.split_k);
+    EXPECT_EQ(stats.longest_list, longest_list);
+    o.catgs.split_k = 0;
+    EXPECT_EQ(r.render(scene, camera, o, out).longest_list, longest_list);
 }
 
 }  // namespace

@@ -235,6 +235,8 @@ void CudaRenderer<T>::Impl::begin_frame(const Frame<T>& f, const HostOutputs& ou
     }
 
     CATGS_CUDA_CHECK(cudaMemsetAsync(frame_counters(), 0, sizeof(FrameCounters), s));
+    // ranges resets the other task counters per band (and a cached frame keeps its key frame's).
+    CATGS_CUDA_CHECK(cudaMemsetAsync(&task_counters()->longest_list, 0, sizeof(TaskCounters::longest_list), s));
     const unsigned int far_bits = 0x7f800000u;  // +inf: the atomicMin start of the nearest depth
     CATGS_CUDA_CHECK(
         cudaMemcpyAsync(&frame_counters()->min_depth_bits, &far_bits, sizeof(far_bits), cudaMemcpyHostToDevice, s));
@@ -450,7 +452,28 @@ PixelOutputs CudaRenderer<T>::Impl::device_outputs(const HostOutputs& out) {
         out.partial ? p.image_transmittance.data() : nullptr, out.partial ? p.image_stopped.data() : nullptr};
 }
 
-/// The band's tasks: its tiles, then (bounded) extra sub-tasks.
+/// A frame waits on its longest list when that list holds more than this many times the pairs
+/// each resident task gets on average (two pixels a thread): there a tile's 256 threads, one
+/// pixel each, finish it sooner than 128 (RasterLayout). The bench kit's paths (H200,
+/// 2026-12-03; longest list x resident tasks / pairs, rasterize median one pixel / two pixels
+/// a thread): city 4K 0.66 (1.90 / 1.74 ms), garden low 4K 1.37 (1.22 / 1.12), garden survey 4K
+/// 1.99 (1.70 / 1.82), city 1080p 2.24 (0.83 / 0.81), garden low 1080p 5.5 (1.44 / 2.10),
+/// garden survey 1080p 5.9 (2.54 / 3.71).
+constexpr double kCriticalListShare = 1.7;
+
+/// The layout of this frame's rasterize, from the last frame's lists (a path's frames change
+/// slowly, and this one's are known only once it is drawn).
+template <typename T>
+RasterLayout CudaRenderer<T>::Impl::raster_layout() {
+    if (limits.raster_layout != RasterLayout::automatic) return limits.raster_layout;
+    if (!last.rendered || last.pairs == 0) return RasterLayout::two_pixels_per_thread;
+    if (two_pixel_tasks == 0) two_pixel_tasks = cuda::resident_tasks<T>(RasterLayout::two_pixels_per_thread);
+    const double share = static_cast<double>(last.tasks.longest_list) * static_cast<double>(two_pixel_tasks) /
+                         static_cast<double>(last.pairs);
+    return share > kCriticalListShare ? RasterLayout::pixel_per_thread : RasterLayout::two_pixels_per_thread;
+}
+
+/// The band's tasks: its extra sub-tasks (bounded), then its tiles.
 template <typename T>
 void CudaRenderer<T>::Impl::rasterize(const Frame<T>& f, TileRows rows, std::uint64_t pairs, const PixelOutputs& out) {
     events.record(Event::split, stream);
@@ -458,14 +481,14 @@ void CudaRenderer<T>::Impl::rasterize(const Frame<T>& f, TileRows rows, std::uin
     const std::uint32_t band_tiles = static_cast<std::uint32_t>(rows.end - rows.begin) * f.view.tiles_x;
     const std::uint64_t max_extra = max_extra_tasks(f, pairs);
     // Not in exact mode, the ground truth: there every Gaussian meets every pixel's own test.
-    const TaskGrid grid{first_tile,    band_tiles, f.split_used,
-                        f.shared_list, pairs,      f.options->culling != Culling::exact};
+    const TaskGrid grid{
+        first_tile, band_tiles, f.split_used, f.shared_list, pairs, f.options->culling != Culling::exact, max_extra};
     const TileBuffers& t = buffers.tiles;
     cuda::rasterize(
-        RasterizeArgs<T>{grid, band_tiles + max_extra, t.range_begin.data(), t.range_end.data(), t.split_slot.data(),
-                         t.labels.data(), task_counters(), buffers.pairs.values[buffers.pairs.current].data(),
-                         buffers.gaussians.projected.data(), f.view, f.background, f.tail,
-                         buffers.pixels.partials.data(), out},
+        RasterizeArgs<T>{grid, band_tiles + max_extra, raster_layout(), t.range_begin.data(), t.range_end.data(),
+                         t.split_slot.data(), t.labels.data(), task_counters(),
+                         buffers.pairs.values[buffers.pairs.current].data(), buffers.gaussians.projected.data(), f.view,
+                         f.background, f.tail, buffers.pixels.partials.data(), out},
         stream);
     events.record(Event::rasterize, stream);
 }
@@ -557,6 +580,7 @@ FrameStats CudaRenderer<T>::Impl::frame_stats(const Frame<T>& f) const {
     stats.split_k = f.split_used ? tc.split_k : 0;
     stats.split_tasks = f.split_used ? tc.extra_tasks : 0;
     stats.tasks = f.tiles + stats.split_tasks;
+    stats.longest_list = tc.longest_list;
     events.write(stats.stage_ms);
     stats.total_ms = stats.stage_ms.sum();
     stats.arena_bytes = buffers.bytes();

@@ -44,10 +44,19 @@ namespace catgs::cuda {
 /// True when a CUDA device is present and usable (tests skip otherwise).
 bool device_available(std::string* reason = nullptr);
 
+/// How rasterize spreads a tile's 256 pixels over threads. Two pixels a thread share each
+/// Gaussian's fetch and walk, and issue fewer instructions; one pixel a thread gives a tile
+/// twice the warps, which wins where a frame waits on its longest lists (a grazing view of a
+/// ground plane at 1080p). automatic picks from the last frame's longest list
+/// (kCriticalListShare, cuda_renderer.cu).
+enum class RasterLayout { automatic, pixel_per_thread, two_pixels_per_thread };
+
 struct CudaLimits {
     /// Most tile-Gaussian pairs one pass may hold; 0 = derive from free device memory at
     /// the first frame (a quarter of what is free, at 24 bytes a pair plus sort space).
     std::uint64_t max_pairs = 0;
+    /// Tests force each layout in turn; any other user leaves it automatic.
+    RasterLayout raster_layout = RasterLayout::automatic;
 };
 
 /// Host copies of the last frame's stage outputs, laid out as CpuRenderer's accessors are (partials

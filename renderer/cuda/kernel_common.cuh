@@ -49,6 +49,7 @@ struct TaskCounters {
     unsigned int extra_tasks;           // split: atomic task counter beyond the tiles
     unsigned int split_slots;           // split: partial slots handed out
     unsigned int split_tiles;           // split: tiles that were split
+    unsigned long long longest_list;    // rasterize: the most pairs one tile list holds (frame-wide, last)
 };
 struct Counters {
     FrameCounters frame;

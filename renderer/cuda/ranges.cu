@@ -2,6 +2,8 @@
 
 #include "cuda_check.hpp"
 
+#include <cstddef>
+
 namespace catgs::cuda {
 namespace {
 
@@ -35,7 +37,10 @@ void ranges(const RangesArgs& a, cudaStream_t s) {
     CATGS_CUDA_CHECK(cudaMemsetAsync(a.range_end, 0, a.tiles * sizeof(std::uint64_t), s));
     TaskCounters fresh{};
     fresh.split_k = a.fixed_split_k;
-    CATGS_CUDA_CHECK(cudaMemcpyAsync(a.counters, &fresh, sizeof(fresh), cudaMemcpyHostToDevice, s));
+    // All but longest_list, the last: it spans the frame's bands (cleared when a frame begins).
+    static_assert(offsetof(TaskCounters, longest_list) + sizeof(fresh.longest_list) == sizeof(TaskCounters));
+    CATGS_CUDA_CHECK(
+        cudaMemcpyAsync(a.counters, &fresh, offsetof(TaskCounters, longest_list), cudaMemcpyHostToDevice, s));
     if (a.pairs == 0 || a.shared_list) return;
     ranges_kernel<<<blocks_for(a.pairs, kThreads), kThreads, 0, s>>>(a.pairs, a.keys, a.tiles, a.range_begin,
                                                                      a.range_end, a.counters);

@@ -4,54 +4,58 @@
 #include "catgs/stages/split.hpp"
 #include "cuda_check.hpp"
 
+#include <type_traits>
+
 namespace catgs::cuda {
 namespace {
 
-/// What the rasterizer reads of one Gaussian, staged in shared memory, with its conic and
-/// min_power in AlphaMath's domain. min_power lets a pixel skip the exp where alpha cannot
-/// reach 1/255 (most pixels of a tile lie outside a Gaussian's 1/255 ellipse): one log per pair
-/// when staged instead of an exp per pixel. Aligned so that a warp reads it with 16-byte loads
-/// (3 in float, not 10 of 4 bytes): the kernel is bound by the instructions it issues.
+/// What the rasterizer reads of one Gaussian, staged in shared memory, with its conic in
+/// AlphaMath's domain and the warp blocks its visible box reaches. Aligned so that a warp reads
+/// it with 16-byte loads (3 in float, not 10 of 4 bytes): the kernel is bound by the
+/// instructions it issues.
 template <typename T>
 struct alignas(16) Splat {
     Vec2<T> mean;
     Vec3<T> conic;
-    T min_power;
+    std::uint32_t reaches;  // bit w: the visible box reaches a pixel centre of warp block w
     T opacity;
     Vec3<T> colour;
 };
 
 /// alpha's exponent and exponential. Double, the reference precision, keeps the reference's
 /// own math (gaussian_power, the exact exp). Float works in base 2: the conic is staged
-/// pre-multiplied by -log2(e)/2 (-log2(e) off the diagonal), so that a pixel's exponent is
-/// 5 flops instead of 8 and alpha's exponential one ex2, the instruction __expf issues after its
-/// own multiply by log2(e). ex2.approx.ftz is within 2^-22 relative; with the pre-scaling's
-/// roundings the exponent is within a few ulp of log2(e) times the reference's, so alpha is
-/// within about 1e-6 relative on the powers that can reach 1/255, far below the 8-bit output's
-/// 2e-3.
+/// pre-multiplied by -log2(e)/2 (-log2(e) off the diagonal), so that alpha's exponential is one
+/// ex2, the instruction __expf issues after its own multiply by log2(e), and the exponent's
+/// terms in dy are taken once a row of pixels (Row), leaving 3 flops a pixel. ex2.approx.ftz
+/// is within 2^-22 relative; with the pre-scaling's roundings the exponent is within a few ulp
+/// of log2(e) times the reference's, so alpha is within about 1e-6 relative on the powers
+/// that can reach 1/255, far below the 8-bit output's 2e-3.
 template <typename T>
 struct AlphaMath {
+    struct Row {
+        T py;
+    };
     __device__ static Vec3<T> staged_conic(Vec3<T> conic) { return conic; }
-    __device__ static T staged_min_power(T opacity) { return min_visible_power(opacity); }
-    __device__ static T power(const Splat<T>& s, T px, T py) { return gaussian_power(s.mean, s.conic, px, py); }
+    __device__ static Row row(const Splat<T>&, T py) { return {py}; }
+    __device__ static T power(const Splat<T>& s, T px, Row r) { return gaussian_power(s.mean, s.conic, px, r.py); }
     __device__ T operator()(T power) const { return exp_of(power); }
 };
 template <>
 struct AlphaMath<float> {
     static constexpr float kLog2E = 1.4426950408889634f;
-    /// min_power is only a filter before blend's own alpha test: lowered by this many log2 units
-    /// (alpha 0.007% below 1/255) so that no rounding of the staged values can drop a pixel
-    /// whose alpha reaches 1/255.
-    static constexpr float kMinPowerMargin = 1e-4f;
+    struct Row {
+        float cy_dy, cz_dy2;
+    };
     __device__ static Vec3<float> staged_conic(Vec3<float> c) {
         return {-0.5f * kLog2E * c.x, -kLog2E * c.y, -0.5f * kLog2E * c.z};
     }
-    __device__ static float staged_min_power(float opacity) {
-        return kLog2E * min_visible_power(opacity) - kMinPowerMargin;
+    __device__ static Row row(const Splat<float>& s, float py) {
+        const float dy = s.mean.y - py;
+        return {s.conic.y * dy, s.conic.z * dy * dy};
     }
-    __device__ static float power(const Splat<float>& s, float px, float py) {
-        const float dx = s.mean.x - px, dy = s.mean.y - py;
-        return dx * fmaf(s.conic.y, dy, s.conic.x * dx) + s.conic.z * dy * dy;
+    __device__ static float power(const Splat<float>& s, float px, Row r) {
+        const float dx = s.mean.x - px;
+        return fmaf(dx, fmaf(s.conic.x, dx, r.cy_dy), r.cz_dy2);
     }
     __device__ float operator()(float power) const {
         float alpha_scale;
@@ -60,98 +64,183 @@ struct AlphaMath<float> {
     }
 };
 
-// Each warp shades an 8x4 block of its 16x16 tile (2 across, 4 down). While a batch is staged,
-// the thread staging a Gaussian also records which of the 8 blocks its 1/255 box reaches
-// (visible_box; not in exact mode); each warp then walks only the Gaussians of its
-// block, found 32 at a time with one ballot, instead of evaluating every Gaussian of the tile
-// at each of its pixels. A skipped Gaussian has alpha < 1/255 at every pixel of the block, so
-// the image is the one the full walk draws.
+// The 16x16 tile as eight 8x4 warp blocks, 2 across and 4 down. While a batch is staged, the
+// thread staging a Gaussian also records which blocks its 1/255 box reaches (not in exact
+// mode); a warp then walks only the Gaussians that reach one of its blocks, found 32 at a time
+// with one ballot, and shades only the blocks they reach. A skipped Gaussian has alpha < 1/255
+// at every pixel of the block, so the image is the one the full walk draws.
 constexpr int kWarpBlockW = 8, kWarpBlockH = 4, kWarpBlocks = kTilePixels / 32;
 static_assert(kTileSize == 16 && kWarpBlocks == 8 && kWarpBlockW * kWarpBlockH == 32,
               "the warp blocks must tile the 16x16 tile: 2 across, 4 down");
 
-// One block per task, one thread per pixel, Gaussians staged through shared memory
-// a batch at a time; the block stops when all its pixels are done. Blocks past the tiles are
-// the extra sub-tasks; those beyond the atomic task count exit at once.
 template <typename T>
-__global__ void __launch_bounds__(kTilePixels)
+__device__ std::uint32_t blocks_reached(const Projected<T>& p, int tile_x, int tile_y) {
+    const PixelBox<T> box = visible_box(p);
+    std::uint32_t bits = 0;
+    for (int w = 0; w < kWarpBlocks; ++w) {
+        const T cx0 = static_cast<T>(tile_x * kTileSize + (w % 2) * kWarpBlockW) + T(0.5);
+        const T cy0 = static_cast<T>(tile_y * kTileSize + (w / 2) * kWarpBlockH) + T(0.5);
+        if (!box_misses_centres(box, cx0, cy0, cx0 + T(kWarpBlockW - 1), cy0 + T(kWarpBlockH - 1))) bits |= 1u << w;
+    }
+    return bits;
+}
+
+/// Whether every pixel a thread owns is done.
+template <typename T, int Pixels>
+__device__ bool all_done(const PixelAccumulator<T> (&acc)[Pixels]) {
+    bool done = true;
+#pragma unroll
+    for (int b = 0; b < Pixels; ++b) done &= acc[b].done;
+    return done;
+}
+
+/// Gaussians staged a batch at a time, whatever the layout: one per pixel of the tile, so that
+/// a thread stages as many as it owns pixels.
+constexpr int kBatch = kTilePixels;
+
+/// How a task's pixels reach threads: each thread owns pixel (lane % 8, lane / 8) of Pixels
+/// warp blocks, so that a Gaussian's fetch from shared memory and its walk are paid once for
+/// Pixels pixels, and which of them a Gaussian reaches is the same for the whole warp (a
+/// uniform branch). Warp w owns blocks w * Pixels .. w * Pixels + Pixels - 1: with 2 a 16x4
+/// strip, one row of blocks, whose two pixels a thread share their dy terms.
+template <int Pixels>
+struct PixelLayout {
+    static_assert(Pixels == 1 || Pixels == 2, "one pixel a thread, or two side by side");
+    static constexpr int kThreads = kTilePixels / Pixels;
+    static constexpr int kCols = Pixels == 1 ? 1 : 2;
+    static constexpr int kRows = Pixels / kCols;
+    int first_col, first_row;  // the warp's first warp block, in block columns and rows
+    __device__ explicit PixelLayout(int warp)
+        : first_col(Pixels == 1 ? warp % 2 : 0), first_row(Pixels == 1 ? warp / 2 : warp * Pixels / 2) {}
+    __device__ int block(int b) const { return (first_row + b / kCols) * 2 + first_col + b % kCols; }
+};
+
+/// The tile and sub-task index of block `block`; false for a block past the tasks that exist.
+/// With split tiles, the extra sub-tasks come first: each is a full k-long slice, the longest
+/// tasks of the frame, and started last they would run alone on an idle GPU at the end.
+__device__ inline bool task_of_block(const TaskGrid& grid, const TaskLabel* labels, TaskCounters* counters,
+                                     std::uint32_t block, std::uint32_t& tile, std::uint32_t& index) {
+    index = 0;
+    if (grid.split) {
+        if (block < grid.max_extra) {
+            if (block >= counters->extra_tasks) return false;
+            tile = labels[block].tile;
+            index = labels[block].index;
+            return true;
+        }
+        block -= static_cast<std::uint32_t>(grid.max_extra);
+    }
+    if (block >= grid.band_tiles) return false;
+    tile = grid.first_tile + block;
+    return true;
+}
+
+/// Blocks an SM is asked to hold: in float what ptxas chose unasked when measured (40 and 56
+/// registers); double, the reference precision, needs room for its 64-bit values instead (at
+/// ptxas' own choice it spilled).
+template <typename T, int Pixels>
+constexpr int resident_blocks() {
+    return std::is_same_v<T, double> ? 1 : Pixels == 1 ? 6 : 9;
+}
+
+// One block per task (task_of_block); Gaussians staged through shared memory a batch at a
+// time; the block stops when all its pixels are done.
+template <typename T, int Pixels>
+__global__ void __launch_bounds__(PixelLayout<Pixels>::kThreads, resident_blocks<T, Pixels>())
     rasterize_kernel(TaskGrid grid, const std::uint64_t* range_begin, const std::uint64_t* range_end,
-                     const std::uint32_t* split_slot, const TaskLabel* labels, const TaskCounters* counters,
+                     const std::uint32_t* split_slot, const TaskLabel* labels, TaskCounters* counters,
                      const std::uint32_t* values, const Projected<T>* projected, View<T> view, Vec3<T> background,
                      T tail_transmittance, Partial<T>* partials, PixelOutputs out) {
-    __shared__ Splat<T> batch[kTilePixels];
-    __shared__ std::uint8_t reaches[kTilePixels];  // bit w: the Gaussian may draw in warp block w
-    std::uint32_t tile, index = 0;
-    if (blockIdx.x < grid.band_tiles) {
-        tile = grid.first_tile + blockIdx.x;
-    } else {
-        const std::uint32_t extra = blockIdx.x - grid.band_tiles;
-        if (!grid.split || extra >= counters->extra_tasks) return;  // uniform across the block
-        tile = labels[extra].tile;
-        index = labels[extra].index;
-    }
+    using Layout = PixelLayout<Pixels>;
+    constexpr int kThreads = Layout::kThreads, kStaged = kBatch / kThreads;
+    constexpr unsigned kAll = 0xffffffffu;
+    __shared__ Splat<T> batch[kBatch];
+    __shared__ std::uint8_t reaches[kBatch];  // the same bits, where a ballot reads them without bank conflicts
+    std::uint32_t tile, index;
+    if (!task_of_block(grid, labels, counters, blockIdx.x, tile, index)) return;  // uniform across the block
     const int tile_x = static_cast<int>(tile % view.tiles_x), tile_y = static_cast<int>(tile / view.tiles_x);
-    const int thread = threadIdx.y * kTileSize + threadIdx.x;
+    const int thread = static_cast<int>(threadIdx.x);
     const int warp = thread / 32, lane = thread % 32;
-    const int x = tile_x * kTileSize + (warp % 2) * kWarpBlockW + lane % kWarpBlockW;
-    const int y = tile_y * kTileSize + (warp / 2) * kWarpBlockH + lane / kWarpBlockW;
-    const int rank = (y - tile_y * kTileSize) * kTileSize + (x - tile_x * kTileSize);  // the merge's pixel index
-    const bool inside = x < view.width && y < view.height;
+    const Layout layout(warp);
+    const std::uint32_t warp_blocks = ((1u << Pixels) - 1u) << (warp * Pixels);
+    T px[Layout::kCols], py[Layout::kRows];
+#pragma unroll
+    for (int c = 0; c < Layout::kCols; ++c)
+        px[c] = static_cast<T>(tile_x * kTileSize + (layout.first_col + c) * kWarpBlockW + lane % kWarpBlockW) + T(0.5);
+#pragma unroll
+    for (int r = 0; r < Layout::kRows; ++r)
+        py[r] = static_cast<T>(tile_y * kTileSize + (layout.first_row + r) * kWarpBlockH + lane / kWarpBlockW) + T(0.5);
     std::uint64_t begin = grid.shared_list ? 0 : range_begin[tile];
     std::uint64_t end = grid.shared_list ? grid.list_size : range_end[tile];
+    // The whole list's length, once a tile; no one waits on the result: a reduction, not a round trip.
+    if (thread == 0 && index == 0 && end > begin)
+        atomicMax(&counters->longest_list, static_cast<unsigned long long>(end - begin));
     const std::uint32_t slot = grid.split ? split_slot[tile] : kNoSlot;
     if (slot != kNoSlot) subtask_range(begin, end, counters->split_k, index, begin, end);
     const T threshold = index > 0 ? tail_transmittance : static_cast<T>(kMinTransmittance);
-    const T px = static_cast<T>(x) + T(0.5), py = static_cast<T>(y) + T(0.5);
 
-    PixelAccumulator<T> acc;
-    acc.done = !inside;
-    for (std::uint64_t start = begin; start < end; start += kTilePixels) {
-        if (__syncthreads_count(acc.done) == kTilePixels) break;
-        const std::uint64_t idx = start + thread;
-        if (idx < end) {
+    PixelAccumulator<T> acc[Pixels];
+#pragma unroll
+    for (int b = 0; b < Pixels; ++b)
+        acc[b].done = !(px[b % Layout::kCols] < static_cast<T>(view.width) &&
+                        py[b / Layout::kCols] < static_cast<T>(view.height));
+    for (std::uint64_t start = begin; start < end; start += kBatch) {
+        if (__syncthreads_count(all_done(acc)) == kThreads) break;
+#pragma unroll
+        for (int k = 0; k < kStaged; ++k) {
+            const int at = k * kThreads + thread;
+            const std::uint64_t idx = start + at;
+            if (idx >= end) break;
             const Projected<T>& p = projected[values[idx]];
-            batch[thread] = Splat<T>{p.mean, AlphaMath<T>::staged_conic(p.conic),
-                                     AlphaMath<T>::staged_min_power(p.opacity), p.opacity, p.colour};
-            std::uint8_t bits = 0xff;
-            if (grid.warp_skip) {
-                const PixelBox<T> box = visible_box(p);
-                bits = 0;
-                for (int w = 0; w < kWarpBlocks; ++w) {
-                    const T cx0 = static_cast<T>(tile_x * kTileSize + (w % 2) * kWarpBlockW) + T(0.5);
-                    const T cy0 = static_cast<T>(tile_y * kTileSize + (w / 2) * kWarpBlockH) + T(0.5);
-                    if (!box_misses_centres(box, cx0, cy0, cx0 + T(kWarpBlockW - 1), cy0 + T(kWarpBlockH - 1)))
-                        bits |= static_cast<std::uint8_t>(1u << w);
-                }
-            }
-            reaches[thread] = bits;
+            const std::uint32_t bits = grid.warp_skip ? blocks_reached(p, tile_x, tile_y) : 0xffu;
+            batch[at] = Splat<T>{p.mean, AlphaMath<T>::staged_conic(p.conic), bits, p.opacity, p.colour};
+            reaches[at] = static_cast<std::uint8_t>(bits);
         }
         __syncthreads();
-        const int count = end - start < kTilePixels ? static_cast<int>(end - start) : kTilePixels;
+        const int count = end - start < kBatch ? static_cast<int>(end - start) : kBatch;
         // Warp-uniform from here: every lane walks the same Gaussians in list order.
         for (int base = 0; base < count; base += 32) {
-            if (__all_sync(0xffffffffu, acc.done)) break;
+            if (__all_sync(kAll, all_done(acc))) break;
             const int mine = base + lane;
-            unsigned todo = __ballot_sync(0xffffffffu, mine < count && (reaches[mine] >> warp & 1u));
+            unsigned todo = __ballot_sync(kAll, mine < count && (reaches[mine] & warp_blocks) != 0);
             while (todo != 0) {
-                const int j = base + __ffs(todo) - 1;
+                const Splat<T> s = batch[base + __ffs(todo) - 1];  // by value: three 16-byte loads in float
                 todo &= todo - 1;
-                if (acc.done) continue;
-                const Splat<T> s = batch[j];  // by value: three 16-byte loads in float
-                const T power = AlphaMath<T>::power(s, px, py);
-                // blend's tests decide (its power <= 0 holds in either domain); in float only
-                // rounding at alpha = 1/255 and the hardware exp's last bits can differ.
-                if (power >= s.min_power) blend_power_with(acc, power, s.opacity, s.colour, threshold, AlphaMath<T>{});
+                typename AlphaMath<T>::Row rows[Layout::kRows];
+#pragma unroll
+                for (int r = 0; r < Layout::kRows; ++r) rows[r] = AlphaMath<T>::row(s, py[r]);
+#pragma unroll
+                for (int b = 0; b < Pixels; ++b) {
+                    if (!(s.reaches >> layout.block(b) & 1u)) continue;  // uniform: the warp skips it
+                    const T power = AlphaMath<T>::power(s, px[b % Layout::kCols], rows[b / Layout::kCols]);
+                    // blend's tests decide (its power <= 0 holds in either domain); in float only
+                    // rounding at alpha = 1/255 and the hardware exp's last bits can differ.
+                    blend_power_unless_done(acc[b], power, s.opacity, s.colour, threshold, AlphaMath<T>{});
+                }
             }
         }
     }
-    if (!inside) return;
-    if (slot == kNoSlot) {
-        write_pixel(acc, background, static_cast<std::size_t>(y) * view.width + x, out);
-    } else {
-        partials[(static_cast<std::size_t>(slot) + index) * kTilePixels + rank] =
-            Partial<T>{acc.colour, acc.transmittance};
+#pragma unroll
+    for (int b = 0; b < Pixels; ++b) {
+        const int x = tile_x * kTileSize + (layout.first_col + b % Layout::kCols) * kWarpBlockW + lane % kWarpBlockW;
+        const int y = tile_y * kTileSize + (layout.first_row + b / Layout::kCols) * kWarpBlockH + lane / kWarpBlockW;
+        if (x >= view.width || y >= view.height) continue;
+        if (slot == kNoSlot) {
+            write_pixel(acc[b], background, static_cast<std::size_t>(y) * view.width + x, out);
+        } else {
+            const int rank =
+                (y - tile_y * kTileSize) * kTileSize + (x - tile_x * kTileSize);  // the merge's pixel index
+            partials[(static_cast<std::size_t>(slot) + index) * kTilePixels + rank] =
+                Partial<T>{acc[b].colour, acc[b].transmittance};
+        }
     }
+}
+
+template <typename T, int Pixels>
+void launch_rasterize(const RasterizeArgs<T>& a, cudaStream_t s) {
+    rasterize_kernel<T, Pixels><<<static_cast<unsigned>(a.blocks), PixelLayout<Pixels>::kThreads, 0, s>>>(
+        a.grid, a.range_begin, a.range_end, a.split_slot, a.labels, a.counters, a.values, a.projected, a.view,
+        a.background, a.tail_transmittance, a.partials, a.out);
 }
 
 }  // namespace
@@ -159,13 +248,30 @@ __global__ void __launch_bounds__(kTilePixels)
 template <typename T>
 void rasterize(const RasterizeArgs<T>& a, cudaStream_t s) {
     if (a.blocks == 0) return;
-    rasterize_kernel<T><<<static_cast<unsigned>(a.blocks), dim3(kTileSize, kTileSize), 0, s>>>(
-        a.grid, a.range_begin, a.range_end, a.split_slot, a.labels, a.counters, a.values, a.projected, a.view,
-        a.background, a.tail_transmittance, a.partials, a.out);
+    if (a.layout == RasterLayout::pixel_per_thread)
+        launch_rasterize<T, 1>(a, s);
+    else
+        launch_rasterize<T, 2>(a, s);
     CATGS_CUDA_CHECK_LAUNCH("rasterize_kernel");
+}
+
+template <typename T>
+std::uint64_t resident_tasks(RasterLayout layout) {
+    int device = 0, sms = 0, blocks = 0;
+    CATGS_CUDA_CHECK(cudaGetDevice(&device));
+    CATGS_CUDA_CHECK(cudaDeviceGetAttribute(&sms, cudaDevAttrMultiProcessorCount, device));
+    if (layout == RasterLayout::pixel_per_thread)
+        CATGS_CUDA_CHECK(cudaOccupancyMaxActiveBlocksPerMultiprocessor(&blocks, rasterize_kernel<T, 1>,
+                                                                       PixelLayout<1>::kThreads, 0));
+    else
+        CATGS_CUDA_CHECK(cudaOccupancyMaxActiveBlocksPerMultiprocessor(&blocks, rasterize_kernel<T, 2>,
+                                                                       PixelLayout<2>::kThreads, 0));
+    return static_cast<std::uint64_t>(sms) * static_cast<std::uint64_t>(blocks);
 }
 
 template void rasterize(const RasterizeArgs<float>&, cudaStream_t);
 template void rasterize(const RasterizeArgs<double>&, cudaStream_t);
+template std::uint64_t resident_tasks<float>(RasterLayout);
+template std::uint64_t resident_tasks<double>(RasterLayout);
 
 }  // namespace catgs::cuda

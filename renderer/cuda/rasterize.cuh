@@ -1,7 +1,7 @@
-// rasterize: one 256-thread block per task (a 16x16 tile or a sub-task of a split tile), the
-// Gaussians staged through shared memory a batch at a time and blended front to back per pixel
-// (stages/blend.hpp). Tiles that are not split write their pixels; sub-tasks write partial
-// (R, A) for merge.
+// rasterize: one block per task (a 16x16 tile or a sub-task of a split tile), of 256 threads
+// of one pixel each or 128 of two (RasterLayout), the Gaussians staged through shared memory a
+// batch at a time and blended front to back per pixel (stages/blend.hpp). Tiles that are not
+// split write their pixels; sub-tasks write partial (R, A) for merge.
 #pragma once
 
 #include <cuda_runtime_api.h>
@@ -13,6 +13,7 @@
 #include "catgs/stages/project.hpp"
 #include "catgs/stages/split.hpp"
 #include "catgs/stages/view.hpp"
+#include "cuda_renderer.hpp"
 #include "kernel_common.cuh"
 
 namespace catgs::cuda {
@@ -23,18 +24,20 @@ struct TaskGrid {
     bool split;        // split_slot / labels / partials are valid
     bool shared_list;  // exact culling: one list for every tile
     std::uint64_t list_size;
-    bool warp_skip;  // warps skip Gaussians whose visible_box misses their block
+    bool warp_skip;           // warps skip Gaussians whose visible_box misses their block
+    std::uint64_t max_extra;  // room for extra sub-tasks (split): blocks [0, max_extra) hold them
 };
 
 template <typename T>
 struct RasterizeArgs {
     TaskGrid grid;
     std::uint64_t blocks;  // the band's tiles plus room for its extra sub-tasks
+    RasterLayout layout;
     const std::uint64_t* range_begin;
     const std::uint64_t* range_end;
     const std::uint32_t* split_slot;
     const TaskLabel* labels;
-    const TaskCounters* counters;
+    TaskCounters* counters;       // rasterize records the longest task
     const std::uint32_t* values;  // sorted
     const Projected<T>* projected;
     View<T> view;
@@ -46,5 +49,10 @@ struct RasterizeArgs {
 
 template <typename T>
 void rasterize(const RasterizeArgs<T>& args, cudaStream_t stream);
+
+/// How many tasks the current device holds at once in `layout` (multiprocessors times the
+/// kernel's resident blocks).
+template <typename T>
+std::uint64_t resident_tasks(RasterLayout layout);
 
 }  // namespace catgs::cuda

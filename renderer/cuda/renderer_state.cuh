@@ -116,6 +116,8 @@ struct CudaRenderer<T>::Impl {
     void key_rendered(const Frame<T>& f, const FrameCounters& c);
     FrameStats frame_stats(const Frame<T>& f) const;
 
+    std::uint64_t two_pixel_tasks = 0;  // resident_tasks, asked once
+    RasterLayout raster_layout();
     std::uint64_t max_extra_tasks(const Frame<T>& f, std::uint64_t pairs) const {
         return f.split_used ? pairs / f.k_min + 1 : 0;
     }

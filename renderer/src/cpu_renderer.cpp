@@ -165,6 +165,7 @@ FrameStats CpuRenderer<T>::render_frame(const Scene& scene, const Camera& camera
         stats.pairs = rendered_pairs_;
         stats.tasks = tasks_.size();
         stats.split_tasks = split_tasks_;
+        stats.longest_list = longest_list_;
     }
     stats.total_ms = elapsed_ms(start);
     stats.split_k = split_k_;
@@ -462,8 +463,11 @@ std::uint32_t CpuRenderer<T>::split(const CatgsOptions& options) {
     for (std::uint32_t t = first; t < last; ++t) tasks_.push_back({t, 0});
     std::uint32_t slots = 0;
     split_tasks_ = 0;
+    longest_list_ = 0;
     for (std::uint32_t t = first; t < last; ++t) {
-        const std::uint32_t splits = split_count(ranges_[t].end - ranges_[t].begin, k);
+        const std::uint64_t size = ranges_[t].end - ranges_[t].begin;
+        longest_list_ = std::max(longest_list_, size);
+        const std::uint32_t splits = split_count(size, k);
         if (splits == 0) continue;
         split_slot_[t] = slots;
         slots += splits + 1;

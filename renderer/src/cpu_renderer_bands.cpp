@@ -105,7 +105,7 @@ void CpuRenderer<T>::render_bands(const Scene& scene, const View<T>& view, const
     stats.stage_ms[Stage::keys] += elapsed_ms(t);  // the CPU backend folds scan into keys
     emitted_keys_.clear();
     emitted_values_.clear();
-    std::uint64_t pairs = 0, split_tasks = 0;
+    std::uint64_t pairs = 0, split_tasks = 0, longest_list = 0;
     for (const TileRows& rows : bands) {
         band_ = rows;
         t = Clock::now();
@@ -120,13 +120,16 @@ void CpuRenderer<T>::render_bands(const Scene& scene, const View<T>& view, const
         stats.stage_ms[Stage::merge] += elapsed_ms(t);
         pairs += rendered_pairs_;
         split_tasks += split_tasks_;
+        longest_list = std::max(longest_list, longest_list_);
     }
     band_ = TileRows{};
     rendered_pairs_ = pairs;
     split_tasks_ = split_tasks;
+    longest_list_ = longest_list;
     stats.bands = static_cast<int>(bands.size());
     stats.pairs = pairs;
     stats.split_tasks = split_tasks;
+    stats.longest_list = longest_list;
     stats.tasks = static_cast<std::uint64_t>(view.tiles_x) * static_cast<std::uint64_t>(view.tiles_y) + split_tasks;
 }
 

@@ -134,6 +134,7 @@ Result run_config(catgs::Renderer& renderer, const std::vector<catgs::Camera>& c
                              {"bands", s.bands},
                              {"tasks", s.tasks},
                              {"split_tasks", s.split_tasks},
+                             {"longest_list", s.longest_list},
                              {"split_k", s.split_k},
                              {"chunks", s.chunks},
                              {"chunks_culled", s.chunks_culled}};

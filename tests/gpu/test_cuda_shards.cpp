@@ -63,8 +63,9 @@ PartialDifference difference(const PartialImage& a, const PartialImage& b) {
 }
 
 template <typename T>
-PartialImage gpu_partial(const Scene& scene, const Camera& camera, const RenderOptions& options) {
-    cuda::CudaRenderer<T> renderer;
+PartialImage gpu_partial(const Scene& scene, const Camera& camera, const RenderOptions& options,
+                         cuda::RasterLayout layout) {
+    cuda::CudaRenderer<T> renderer(nullptr, cuda::CudaLimits{0, layout});
     renderer.set_scene(std::make_shared<cuda::DeviceScene>(scene, renderer.stream()));
     PartialImage out;
     renderer.render_partial(camera, options, out);
@@ -78,6 +79,11 @@ PartialImage cpu_partial(const Scene& scene, const Camera& camera, const RenderO
     renderer.render_partial(scene, camera, options, out);
     return out;
 }
+
+/// Both of the rasterizer's layouts: the automatic choice would draw these small frames with
+/// one only.
+constexpr cuda::RasterLayout kLayouts[] = {cuda::RasterLayout::pixel_per_thread,
+                                           cuda::RasterLayout::two_pixels_per_thread};
 
 std::vector<Camera> cameras() {
     return test::random_scene_cameras(kWidth, kHeight, kFov);
@@ -98,15 +104,17 @@ TEST_F(CudaShardsTest, FloatPartialsMatchTheCpuPartials) {
     Scene scene = test::random_scene(test::fresh_seed("cuda partial float"), p);
     partition_into_chunks(scene);
     for (const RenderOptions& options : partial_options())
-        for (const Camera& camera : cameras()) {
-            const PartialDifference d =
-                difference(gpu_partial<float>(scene, camera, options), cpu_partial<float>(scene, camera, options));
-            std::cout << "[cuda partial float] split " << options.catgs.split_k << ": colour " << d.colour
-                      << ", transmittance " << d.transmittance << ", stops differing " << d.stops_differing << "\n";
-            EXPECT_LE(d.colour, kFloatMaxAbs);
-            EXPECT_LE(d.transmittance, kFloatMaxAbs);
-            EXPECT_LE(static_cast<double>(d.stops_differing), kFloatMaxStopShare * kWidth * kHeight);
-        }
+        for (const Camera& camera : cameras())
+            for (const cuda::RasterLayout layout : kLayouts) {
+                const PartialDifference d = difference(gpu_partial<float>(scene, camera, options, layout),
+                                                       cpu_partial<float>(scene, camera, options));
+                std::cout << "[cuda partial float] layout " << static_cast<int>(layout) << " split "
+                          << options.catgs.split_k << ": colour " << d.colour << ", transmittance " << d.transmittance
+                          << ", stops differing " << d.stops_differing << "\n";
+                EXPECT_LE(d.colour, kFloatMaxAbs);
+                EXPECT_LE(d.transmittance, kFloatMaxAbs);
+                EXPECT_LE(static_cast<double>(d.stops_differing), kFloatMaxStopShare * kWidth * kHeight);
+            }
 }
 
 TEST_F(CudaShardsTest, DoublePartialsEqualTheCpuPartials) {
@@ -115,13 +123,14 @@ TEST_F(CudaShardsTest, DoublePartialsEqualTheCpuPartials) {
     Scene scene = test::random_scene(test::fresh_seed("cuda partial double"), p);
     partition_into_chunks(scene);
     for (const RenderOptions& options : partial_options())
-        for (const Camera& camera : cameras()) {
-            const PartialDifference d =
-                difference(gpu_partial<double>(scene, camera, options), cpu_partial<double>(scene, camera, options));
-            EXPECT_LE(d.colour, kDoubleMaxAbs);
-            EXPECT_LE(d.transmittance, kDoubleMaxAbs);
-            EXPECT_EQ(d.stops_differing, 0u);
-        }
+        for (const Camera& camera : cameras())
+            for (const cuda::RasterLayout layout : kLayouts) {
+                const PartialDifference d = difference(gpu_partial<double>(scene, camera, options, layout),
+                                                       cpu_partial<double>(scene, camera, options));
+                EXPECT_LE(d.colour, kDoubleMaxAbs) << "layout " << static_cast<int>(layout);
+                EXPECT_LE(d.transmittance, kDoubleMaxAbs) << "layout " << static_cast<int>(layout);
+                EXPECT_EQ(d.stops_differing, 0u) << "layout " << static_cast<int>(layout);
+            }
 }
 
 // R + A * background from the partial is the frame render() draws with that background, up to

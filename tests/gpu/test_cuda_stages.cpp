@@ -197,17 +197,23 @@ TEST_F(CudaStagesTest, DoubleStagesEqualTheCpuStages) {
     const Camera camera = test::forward_camera(333, 197, 75.0);
     const TestScene lists = stage_scene("double", Culling::opacity_aware);
     const TestScene exact = stage_scene("double exact", Culling::exact);
-    for (const Case& c : cases()) {
-        const TestScene& scene = c.options.culling == Culling::exact ? exact : lists;
-        const View<double> view = make_view<double>(camera, scene.host.origin);
-        Both<double> both;
-        both.gpu.set_scene(scene.device);
-        both.render(scene.host, camera, c.options);
-        expect_identical_stages(both.cpu, both.stages, view, "double " + c.name);
-        EXPECT_EQ(both.gpu_stats.pairs, both.cpu_stats.pairs) << c.name;
-        EXPECT_EQ(both.gpu_stats.split_k, both.cpu_stats.split_k) << c.name;
-        EXPECT_EQ(both.gpu_stats.split_tasks, both.cpu_stats.split_tasks) << c.name;
-    }
+    for (const Case& c : cases())
+        for (const cuda::RasterLayout layout :
+             {cuda::RasterLayout::pixel_per_thread, cuda::RasterLayout::two_pixels_per_thread}) {
+            const TestScene& scene = c.options.culling == Culling::exact ? exact : lists;
+            const View<double> view = make_view<double>(camera, scene.host.origin);
+            const std::string what = "double " + c.name + " layout " + std::to_string(static_cast<int>(layout));
+            Both<double> both;
+            both.gpu.set_limits(cuda::CudaLimits{0, layout});
+            both.gpu.set_scene(scene.device);
+            both.render(scene.host, camera, c.options);
+            expect_identical_stages(both.cpu, both.stages, view, what);
+            EXPECT_EQ(both.gpu_stats.pairs, both.cpu_stats.pairs) << what;
+            EXPECT_EQ(both.gpu_stats.split_k, both.cpu_stats.split_k) << what;
+            EXPECT_EQ(both.gpu_stats.split_tasks, both.cpu_stats.split_tasks) << what;
+            EXPECT_EQ(both.gpu_stats.longest_list, both.cpu_stats.longest_list) << what;
+            EXPECT_GT(both.gpu_stats.longest_list, 0u) << what;
+        }
 }
 
 // The speculative cache: key frames with a window of poses (union footprints), and cached

@@ -128,6 +128,7 @@ private:
     int tiles_y_ = 0;                                        // the frame's tile rows
     TileRows band_;                                          // keys, split: the rows of this pass
     std::uint64_t split_tasks_ = 0;                          // split: extra sub-tasks of this pass
+    std::uint64_t longest_list_ = 0;                         // split: the most pairs one tile list of the band holds
     std::uint32_t split_k_ = 0;                              // k of the current task list
     std::vector<std::pair<std::size_t, std::size_t>> runs_;  // chunk_cull: [begin, end) of Gaussians to preprocess
     std::uint64_t chunks_culled_ = 0;                        // chunk_cull: chunks the key frame skipped

@@ -87,6 +87,8 @@ struct FrameStats {
     std::uint64_t tasks = 0;          ///< rasterizer tasks: tiles plus extra split sub-tasks
     std::uint64_t split_tasks = 0;    ///< extra sub-tasks from splitting
     std::uint32_t split_k = 0;        ///< the k used this frame (0: no splitting)
+    /// The most pairs one tile's list holds (exact culling: the one shared list).
+    std::uint64_t longest_list = 0;
     /// Wall time of each stage (stage.hpp). The CPU backend folds scan into keys and has no
     /// copy_out; encode is the server's.
     StageTimes stage_ms;

@@ -31,26 +31,40 @@ CATGS_INLINE T min_visible_power(T opacity) {
     return log_of(static_cast<T>(kMinAlpha) / opacity);
 }
 
-/// blend_gaussian with the power already computed, and alpha's exponential taken by `exp_fn`
-/// (the CUDA float rasterizer passes the hardware's, see rasterize.cu).
+/// blend_gaussian with the power already computed, alpha's exponential taken by `exp_fn` (the
+/// CUDA float rasterizer passes the hardware's, see rasterize.cu), and nothing blended once
+/// acc.done. Straight-line code: the tests are predicates on what is written, not branches
+/// around it, so that a GPU warp whose pixels disagree issues one path, not several (the
+/// rasterizer is bound by the instructions it issues). The exponential is always taken; a
+/// caller that wants to skip it tests min_visible_power first.
+template <typename T, typename ExpFn>
+CATGS_HD void blend_power_unless_done(PixelAccumulator<T>& acc, T power, T opacity, Vec3<T> colour, T min_transmittance,
+                                      ExpFn exp_fn) {
+    const T raw_alpha = opacity * exp_fn(power);
+    // Written so that NaN fails both tests: far off-screen means can make the quadratic form
+    // inf - inf, and min(0.99, NaN) would otherwise draw a NaN alpha as 0.99. `&` rather than
+    // `&&`: every operand is a comparison already made, nothing to short-circuit.
+    const bool draws = !acc.done & (power <= T(0)) & (raw_alpha >= static_cast<T>(kMinAlpha));
+    const T alpha = raw_alpha < static_cast<T>(kMaxAlpha) ? raw_alpha : static_cast<T>(kMaxAlpha);
+    const T next = acc.transmittance * (T(1) - alpha);
+    // graphdeco's exclusive stop: the Gaussian that would bring T below the threshold is not
+    // drawn, and the pixel is done.
+    const bool stops = draws & (next < min_transmittance);
+    acc.done = acc.done | stops;
+    if (draws & !stops) {
+        const T weight = alpha * acc.transmittance;
+        acc.colour = {acc.colour.x + colour.x * weight, acc.colour.y + colour.y * weight,
+                      acc.colour.z + colour.z * weight};
+        acc.transmittance = next;
+    }
+}
+
+/// blend_power_unless_done on a pixel not yet done; returns true when this Gaussian stopped it.
 template <typename T, typename ExpFn>
 CATGS_HD bool blend_power_with(PixelAccumulator<T>& acc, T power, T opacity, Vec3<T> colour, T min_transmittance,
                                ExpFn exp_fn) {
-    // Written so that NaN fails both tests: far off-screen means can make the quadratic form
-    // inf - inf, and min(0.99, NaN) would otherwise draw a NaN alpha as 0.99.
-    if (!(power <= T(0))) return false;
-    T alpha = opacity * exp_fn(power);
-    if (!(alpha >= static_cast<T>(kMinAlpha))) return false;
-    alpha = alpha < static_cast<T>(kMaxAlpha) ? alpha : static_cast<T>(kMaxAlpha);
-    const T next = acc.transmittance * (T(1) - alpha);
-    if (next < min_transmittance) {
-        acc.done = true;
-        return true;
-    }
-    const T weight = alpha * acc.transmittance;
-    acc.colour = {acc.colour.x + colour.x * weight, acc.colour.y + colour.y * weight, acc.colour.z + colour.z * weight};
-    acc.transmittance = next;
-    return false;
+    blend_power_unless_done(acc, power, opacity, colour, min_transmittance, exp_fn);
+    return acc.done;
 }
 
 /// blend_gaussian with the power already computed.
