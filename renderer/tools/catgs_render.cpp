@@ -77,7 +77,8 @@ nlohmann::json frame_json(std::size_t i, const std::string& file, const catgs::F
                          {"pairs", s.pairs},
                          {"key_frame", s.key_frame},
                          {"window", s.window},
-                         {"split_tasks", s.split_tasks}};
+                         {"split_tasks", s.split_tasks},
+                         {"longest_list", s.longest_list}};
     for (catgs::Stage stage : catgs::kStages)
         if (stage != catgs::Stage::encode) frame[std::string(catgs::stage_name(stage)) + "_ms"] = s.stage_ms[stage];
     if (sharded) {
@@ -121,6 +122,7 @@ catgs::FrameStats sum_shards(const catgs::ShardedFrameStats& sharded) {
         s.visible += part.visible;
         s.pairs += part.pairs;
         s.split_tasks += part.split_tasks;
+        s.longest_list = std::max(s.longest_list, part.longest_list);
         s.key_frame = s.key_frame || part.key_frame;
         s.window = std::max(s.window, part.window);
         for (catgs::Stage stage : catgs::kStages) s.stage_ms[stage] += part.stage_ms[stage];
