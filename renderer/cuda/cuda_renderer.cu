@@ -452,25 +452,21 @@ PixelOutputs CudaRenderer<T>::Impl::device_outputs(const HostOutputs& out) {
         out.partial ? p.image_transmittance.data() : nullptr, out.partial ? p.image_stopped.data() : nullptr};
 }
 
-/// A frame waits on its longest list when that list holds more than this many times the pairs
-/// each resident task gets on average (two pixels a thread): there a tile's 256 threads, one
-/// pixel each, finish it sooner than 128 (RasterLayout). The bench kit's paths (H200,
-/// 2026-12-03; longest list x resident tasks / pairs, rasterize median one pixel / two pixels
-/// a thread): city 4K 0.66 (1.90 / 1.74 ms), garden low 4K 1.37 (1.22 / 1.12), garden survey 4K
-/// 1.99 (1.70 / 1.82), city 1080p 2.24 (0.83 / 0.81), garden low 1080p 5.5 (1.44 / 2.10),
-/// garden survey 1080p 5.9 (2.54 / 3.71).
-constexpr double kCriticalListShare = 1.7;
+RasterLayout choose_raster_layout(std::uint64_t longest_list, std::uint64_t pairs, std::uint64_t resident_tasks) {
+    if (pairs == 0) return RasterLayout::two_pixels_per_thread;
+    const double share =
+        static_cast<double>(longest_list) * static_cast<double>(resident_tasks) / static_cast<double>(pairs);
+    return share > kCriticalListShare ? RasterLayout::pixel_per_thread : RasterLayout::two_pixels_per_thread;
+}
 
 /// The layout of this frame's rasterize, from the last frame's lists (a path's frames change
 /// slowly, and this one's are known only once it is drawn).
 template <typename T>
 RasterLayout CudaRenderer<T>::Impl::raster_layout() {
     if (limits.raster_layout != RasterLayout::automatic) return limits.raster_layout;
-    if (!last.rendered || last.pairs == 0) return RasterLayout::two_pixels_per_thread;
+    if (!last.rendered) return RasterLayout::two_pixels_per_thread;
     if (two_pixel_tasks == 0) two_pixel_tasks = cuda::resident_tasks<T>(RasterLayout::two_pixels_per_thread);
-    const double share = static_cast<double>(last.tasks.longest_list) * static_cast<double>(two_pixel_tasks) /
-                         static_cast<double>(last.pairs);
-    return share > kCriticalListShare ? RasterLayout::pixel_per_thread : RasterLayout::two_pixels_per_thread;
+    return choose_raster_layout(last.tasks.longest_list, last.pairs, two_pixel_tasks);
 }
 
 /// The band's tasks: its extra sub-tasks (bounded), then its tiles.

@@ -51,6 +51,19 @@ bool device_available(std::string* reason = nullptr);
 /// (kCriticalListShare, cuda_renderer.cu).
 enum class RasterLayout { automatic, pixel_per_thread, two_pixels_per_thread };
 
+/// A frame waits on its longest list when that list holds more than this many times the pairs
+/// each resident task gets on average (two pixels a thread): there a tile's 256 threads, one
+/// pixel each, finish it sooner than 128. The bench kit's paths (H200, 2026-12-03; longest list
+/// x resident tasks / pairs, rasterize median one pixel / two pixels a thread): city 4K 0.66
+/// (1.90 / 1.74 ms), garden low 4K 1.37 (1.22 / 1.12), garden survey 4K 1.99 (1.70 / 1.82),
+/// city 1080p 2.24 (0.83 / 0.81), garden low 1080p 5.5 (1.44 / 2.10), garden survey 1080p 5.9
+/// (2.54 / 3.71).
+inline constexpr double kCriticalListShare = 1.7;
+
+/// automatic's choice for a frame like one whose longest tile list held `longest_list` of its
+/// `pairs`, on a device that holds `resident_tasks` two-pixel tasks at once.
+RasterLayout choose_raster_layout(std::uint64_t longest_list, std::uint64_t pairs, std::uint64_t resident_tasks);
+
 struct CudaLimits {
     /// Most tile-Gaussian pairs one pass may hold; 0 = derive from free device memory at
     /// the first frame (a quarter of what is free, at 24 bytes a pair plus sort space).

@@ -32,6 +32,25 @@ protected:
     }
 };
 
+// The layout rule needs no device: the kit's paths as measured (longest list, pairs, the
+// H200's resident two-pixel tasks) land on the side that rasterized them faster, and the
+// boundary sits at kCriticalListShare.
+TEST(RasterLayoutChoice, FollowsTheLongestListsShareOfAResidentTask) {
+    constexpr std::uint64_t kH200Tasks = 132 * 9;
+    EXPECT_EQ(cuda::choose_raster_layout(14436, 25'900'000, kH200Tasks), cuda::RasterLayout::two_pixels_per_thread)
+        << "city 4K";
+    EXPECT_EQ(cuda::choose_raster_layout(9304, 8'000'000, kH200Tasks), cuda::RasterLayout::two_pixels_per_thread)
+        << "garden low 4K";
+    EXPECT_EQ(cuda::choose_raster_layout(43232, 8'700'000, kH200Tasks), cuda::RasterLayout::pixel_per_thread)
+        << "garden survey 1080p";
+    EXPECT_EQ(cuda::choose_raster_layout(23097, 5'000'000, kH200Tasks), cuda::RasterLayout::pixel_per_thread)
+        << "garden low 1080p";
+    // 1000 pairs over 100 tasks: 10 a task, so the boundary is a list of 17.
+    EXPECT_EQ(cuda::choose_raster_layout(17, 1000, 100), cuda::RasterLayout::two_pixels_per_thread);
+    EXPECT_EQ(cuda::choose_raster_layout(18, 1000, 100), cuda::RasterLayout::pixel_per_thread);
+    EXPECT_EQ(cuda::choose_raster_layout(0, 0, 100), cuda::RasterLayout::two_pixels_per_thread) << "an empty frame";
+}
+
 ImageRGB8 cpu_render(const Scene& scene, const Camera& camera, const RenderOptions& options) {
     CpuRenderer<float> renderer;
     ImageF out;
