@@ -9,8 +9,9 @@
 //   ranges      per tile [begin, end) in the sorted list
 //   split       CaT-GS Algorithm 1: extra sub-tasks of long lists through an atomic task
 //               counter, each with a (tile, split index) label
-//   rasterize   one 256-thread block per task (16x16 tile or sub-task), batches of Gaussians
-//               in shared memory; sub-tasks write partial (R, A)
+//   rasterize   one block per task (16x16 tile or sub-task), 128 threads of two pixels or 256
+//               of one (RasterLayout), batches of Gaussians in shared memory; sub-tasks
+//               write partial (R, A)
 //   merge       composites the sub-tasks of each split tile front to back
 //   copy_out    RGB8 (quantised on the device) and/or float RGB to the host
 // Each stage is one file (<stage>.cu) with its kernels and a launcher of the same name.

@@ -10,8 +10,9 @@ namespace catgs {
 
 inline constexpr double kPi = 3.14159265358979323846;
 
-/// Tiles are 16x16 pixels: one CUDA block of 256 threads rasterizes one tile, the layout
-/// of graphdeco 3DGS and gsplat; the sort key stores tile ids, so it also sets key bits.
+/// Tiles are 16x16 pixels: one CUDA block rasterizes one tile (256 threads of one pixel, the
+/// layout of graphdeco 3DGS and gsplat, or 128 of two); the sort key stores tile ids, so it
+/// also sets key bits.
 inline constexpr int kTileSize = 16;
 
 /// Default near plane (view-space z). Gaussians at z <= near are culled; 0.2 is graphdeco's
