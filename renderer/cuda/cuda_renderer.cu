@@ -111,6 +111,11 @@ cudaStream_t CudaRenderer<T>::stream() const {
 }
 
 template <typename T>
+bool CudaRenderer<T>::copies_while_drawing() const {
+    return impl_->copy_waits_on_counts();
+}
+
+template <typename T>
 FrameStats CudaRenderer<T>::render(const Camera& camera, const RenderOptions& options, ImageRGB8* rgb8,
                                    ImageF* rgb_float, const FrameHints* hints) {
     return impl_->render(camera, options, HostOutputs{rgb8, rgb_float, nullptr}, hints);
@@ -124,7 +129,8 @@ FrameStats CudaRenderer<T>::render_partial(const Camera& camera, const RenderOpt
 
 // Key frame: chunk_cull -> preprocess -> scan -> keys -> sort -> ranges -> split, in bands of
 // tile rows when the pairs pass the budget; cached frame: reproject (-> keys -> sort -> ranges
-// -> split when it re-sorts); then rasterize -> merge per band, and copy_out.
+// -> split when it re-sorts); then rasterize -> merge per band, each band's drawn rows copied
+// out on the copy stream while the next are drawn.
 template <typename T>
 FrameStats CudaRenderer<T>::Impl::render(const Camera& camera, const RenderOptions& options, const HostOutputs& out,
                                          const FrameHints* hints) {
@@ -152,8 +158,9 @@ FrameStats CudaRenderer<T>::Impl::render(const Camera& camera, const RenderOptio
         }
         f.split_used = cached_split;
     }
-    const PixelOutputs device = device_outputs(out);
+    const PixelOutputs device = device_outputs(f, out);
     for (const TileRows& rows : f.bands) {
+        const bool last_band = &rows == &f.bands.back();
         std::uint64_t pairs = f.total;
         if (f.plan.key) {
             const Event pass_start = f.bands.size() > 1 ? Event::band_scan : Event::scan;
@@ -165,6 +172,10 @@ FrameStats CudaRenderer<T>::Impl::render(const Camera& camera, const RenderOptio
         }
         rasterize(f, rows, pairs, device);
         merge(f, pairs, device);
+        // Enqueued before the host waits on this band, so that its copies overlap what follows.
+        copy_drawn_rows(f, rows.end, out);
+        if (last_band) end_copies();
+        add_raster_times();
     }
     if (!f.plan.key) add_cached_list_times();
     copy_out(f, out);
@@ -234,12 +245,20 @@ void CudaRenderer<T>::Impl::begin_frame(const Frame<T>& f, const HostOutputs& ou
         p.image_stopped.reserve(f.pixels, s);
     }
 
+    // A frame that threw after enqueuing copies left waits on the copy streams; they must see
+    // their counts before this frame resets them (free when the copies are done: a band's
+    // stream ends with its `copied` mark).
+    for (cudaEvent_t copied : copy.copied) CATGS_CUDA_CHECK(cudaStreamWaitEvent(s, copied, 0));
     CATGS_CUDA_CHECK(cudaMemsetAsync(frame_counters(), 0, sizeof(FrameCounters), s));
+    CATGS_CUDA_CHECK(cudaMemsetAsync(copy.tiles_drawn, 0, kMaxCopyBands * sizeof(unsigned int), s));
     // ranges resets the other task counters per band (and a cached frame keeps its key frame's).
     CATGS_CUDA_CHECK(cudaMemsetAsync(&task_counters()->longest_list, 0, sizeof(TaskCounters::longest_list), s));
     const unsigned int far_bits = 0x7f800000u;  // +inf: the atomicMin start of the nearest depth
     CATGS_CUDA_CHECK(
         cudaMemcpyAsync(&frame_counters()->min_depth_bits, &far_bits, sizeof(far_bits), cudaMemcpyHostToDevice, s));
+    reserve_copy_out(copy_out_args(f, out), f.pixels);
+    copied_copy_bands = 0;
+    CATGS_CUDA_CHECK(cudaEventRecord(copy.ready, s));  // the tile counts are 0 from here
     events.clear();
     events.record(Event::start, s);
 }
@@ -444,14 +463,6 @@ bool CudaRenderer<T>::Impl::ranges_and_split(const Frame<T>& f, std::uint64_t pa
     return split;
 }
 
-template <typename T>
-PixelOutputs CudaRenderer<T>::Impl::device_outputs(const HostOutputs& out) {
-    PixelBuffers<T>& p = buffers.pixels;
-    return PixelOutputs{
-        out.rgb8 ? p.image_rgb8.data() : nullptr, out.rgb || out.partial ? p.image_float.data() : nullptr,
-        out.partial ? p.image_transmittance.data() : nullptr, out.partial ? p.image_stopped.data() : nullptr};
-}
-
 RasterLayout choose_raster_layout(std::uint64_t longest_list, std::uint64_t pairs, std::uint64_t resident_tasks) {
     if (pairs == 0) return RasterLayout::two_pixels_per_thread;
     const double share =
@@ -499,43 +510,15 @@ void CudaRenderer<T>::Impl::merge(const Frame<T>& f, std::uint64_t pairs, const 
                     stream);
     }
     events.record(Event::merge, stream);
+}
+
+/// A band's rasterize and merge times, once its copies are enqueued (a banded frame marks
+/// them again for the next band).
+template <typename T>
+void CudaRenderer<T>::Impl::add_raster_times() {
     events.synchronize(Event::merge);
     events.add(Stage::rasterize, Event::split, Event::rasterize);
     events.add(Stage::merge, Event::rasterize, Event::merge);
-}
-
-/// The image to the host, and the frame's counters.
-template <typename T>
-void CudaRenderer<T>::Impl::copy_out(const Frame<T>& f, const HostOutputs& out) {
-    const cudaStream_t s = stream;
-    events.record(Event::copy_start, s);
-    const PixelOutputs device = device_outputs(out);
-    cuda::copy_out(CopyOutArgs{f.pixels, device.rgb8, device.rgb, device.transmittance, device.stopped, &host.rgb8,
-                               &host.rgb_float, &host.transmittance, &host.stopped},
-                   s);
-    events.record(Event::copy_out, s);
-    CATGS_CUDA_CHECK(cudaMemcpyAsync(host.counters.data(), buffers.window.counters.data(), sizeof(Counters),
-                                     cudaMemcpyDeviceToHost, s));
-    CATGS_CUDA_CHECK(cudaStreamSynchronize(s));
-    if (out.rgb8) {
-        out.rgb8->width = f.view.width;
-        out.rgb8->height = f.view.height;
-        out.rgb8->rgb.assign(host.rgb8.data(), host.rgb8.data() + 3 * f.pixels);
-    }
-    if (out.rgb) {
-        out.rgb->width = f.view.width;
-        out.rgb->height = f.view.height;
-        out.rgb->rgb.assign(host.rgb_float.data(), host.rgb_float.data() + 3 * f.pixels);
-    }
-    if (out.partial) {
-        PartialImage& p = *out.partial;
-        p.width = f.view.width;
-        p.height = f.view.height;
-        p.colour.assign(host.rgb_float.data(), host.rgb_float.data() + 3 * f.pixels);
-        p.transmittance.assign(host.transmittance.data(), host.transmittance.data() + f.pixels);
-        p.stopped.assign(host.stopped.data(), host.stopped.data() + f.pixels);
-    }
-    events.add(Stage::copy_out, Event::copy_start, Event::copy_out);
 }
 
 /// The planner learns about a key frame only when its lists cover the whole frame.

@@ -13,7 +13,8 @@
 //               of one (RasterLayout), batches of Gaussians in shared memory; sub-tasks
 //               write partial (R, A)
 //   merge       composites the sub-tasks of each split tile front to back
-//   copy_out    RGB8 (quantised on the device) and/or float RGB to the host
+//   copy_out    RGB8 (quantised on the device) and/or float RGB to the host, on a second
+//               stream, each band of rows as soon as its tiles are drawn
 // Each stage is one file (<stage>.cu) with its kernels and a launcher of the same name.
 // A key frame of the CaT-GS cache preprocesses against the window's W poses; cached frames
 // re-project the cached Gaussians, re-key and re-sort the cached pairs, and rasterize.
@@ -45,6 +46,10 @@ namespace catgs::cuda {
 /// True when a CUDA device is present and usable (tests skip otherwise).
 bool device_available(std::string* reason = nullptr);
 
+/// Whether the driver takes stream memory waits (cuStreamWaitValue32), which copy_out needs to
+/// copy each band of rows while the rest are drawn; asked once a process.
+bool stream_memory_waits_available();
+
 /// How rasterize spreads a tile's 256 pixels over threads. Two pixels a thread share each
 /// Gaussian's fetch and walk, and issue fewer instructions; one pixel a thread gives a tile
 /// twice the warps, which wins where a frame waits on its longest lists (a grazing view of a
@@ -71,6 +76,9 @@ struct CudaLimits {
     std::uint64_t max_pairs = 0;
     /// Tests force each layout in turn; any other user leaves it automatic.
     RasterLayout raster_layout = RasterLayout::automatic;
+    /// copy_out copies each band of rows as soon as its tiles are drawn, while the rest are;
+    /// false waits for the whole pass (tests compare the two, and A/B runs measure them).
+    bool overlap_copy = true;
 };
 
 /// Host copies of the last frame's stage outputs, laid out as CpuRenderer's accessors are (partials
@@ -131,6 +139,10 @@ public:
     void reset_cache();
 
     cudaStream_t stream() const;
+
+    /// Whether copy_out copies each band of rows as soon as it is drawn: CudaLimits::overlap_copy
+    /// and stream_memory_waits_available(); otherwise after each pass.
+    bool copies_while_drawing() const;
 
     /// Test-only: copies the last frame's stage outputs to the host (synchronises the stream).
     /// Throws catgs::Error when there was no frame, or when it was rendered in bands (the

@@ -14,20 +14,23 @@ __global__ void __launch_bounds__(kTilePixels)
                  Vec3<T> background, PixelOutputs out) {
     if (blockIdx.x >= counters->split_tiles) return;
     const std::uint32_t tile = split_tiles[blockIdx.x];
+    const int tile_y = static_cast<int>(tile / view.tiles_x);
     const int x = static_cast<int>(tile % view.tiles_x) * kTileSize + threadIdx.x;
-    const int y = static_cast<int>(tile / view.tiles_x) * kTileSize + threadIdx.y;
-    if (x >= view.width || y >= view.height) return;
-    const std::uint32_t parts = split_count(range_end[tile] - range_begin[tile], counters->split_k) + 1;
-    const std::size_t base =
-        static_cast<std::size_t>(split_slot[tile]) * kTilePixels + threadIdx.y * kTileSize + threadIdx.x;
-    MergeState<T> m;
-    for (std::uint32_t i = 0; i < parts && !m.done; ++i)
-        merge_partial(m, partials[base + static_cast<std::size_t>(i) * kTilePixels]);
-    PixelAccumulator<T> acc;
-    acc.colour = m.colour;
-    acc.transmittance = m.transmittance;
-    acc.done = m.done;
-    write_pixel(acc, background, static_cast<std::size_t>(y) * view.width + x, out);
+    const int y = tile_y * kTileSize + threadIdx.y;
+    if (x < view.width && y < view.height) {  // no return: tile_drawn waits for the whole block
+        const std::uint32_t parts = split_count(range_end[tile] - range_begin[tile], counters->split_k) + 1;
+        const std::size_t base =
+            static_cast<std::size_t>(split_slot[tile]) * kTilePixels + threadIdx.y * kTileSize + threadIdx.x;
+        MergeState<T> m;
+        for (std::uint32_t i = 0; i < parts && !m.done; ++i)
+            merge_partial(m, partials[base + static_cast<std::size_t>(i) * kTilePixels]);
+        PixelAccumulator<T> acc;
+        acc.colour = m.colour;
+        acc.transmittance = m.transmittance;
+        acc.done = m.done;
+        write_pixel(acc, background, static_cast<std::size_t>(y) * view.width + x, out);
+    }
+    tile_drawn(out, tile_y);
 }
 
 }  // namespace

@@ -234,6 +234,7 @@ __global__ void __launch_bounds__(PixelLayout<Pixels>::kThreads, resident_blocks
                 Partial<T>{acc[b].colour, acc[b].transmittance};
         }
     }
+    if (slot == kNoSlot) tile_drawn(out, tile_y);  // a split tile is drawn by merge
 }
 
 template <typename T, int Pixels>

@@ -13,6 +13,7 @@
 #include "catgs/render_options.hpp"
 #include "catgs/stages/tiles.hpp"
 #include "catgs/stages/view.hpp"
+#include "copy_out.cuh"
 #include "cuda_renderer.hpp"
 #include "frame_buffers.hpp"
 #include "kernel_common.cuh"
@@ -82,6 +83,15 @@ struct CudaRenderer<T>::Impl {
     FrameBuffers<T> buffers;
     HostStaging<T> host;
     LastFrame last;  // read_back_stages
+    CopyStreams copy;
+    bool copy_waits = stream_memory_waits_available();  // false once the driver refused one
+    int copied_copy_bands = 0;                          // of this frame, enqueued on the copy stream
+
+    bool copy_waits_on_counts() const { return limits.overlap_copy && copy_waits; }
+    /// Tile rows a copy band holds: the image's rows over kMaxCopyBands, at least one.
+    static int rows_per_copy_band(const Frame<T>& f) {
+        return std::max(1, (f.view.tiles_y + kMaxCopyBands - 1) / kMaxCopyBands);
+    }
 
     FrameCounters* frame_counters() { return &buffers.window.counters.data()->frame; }
     TaskCounters* task_counters() { return &buffers.window.counters.data()->tasks; }
@@ -94,7 +104,8 @@ struct CudaRenderer<T>::Impl {
     Frame<T> plan_frame(const Camera& camera, const RenderOptions& options, const FrameHints* hints);
     void begin_frame(const Frame<T>& f, const HostOutputs& out);
     /// Where this frame's kernels write, for `out`.
-    PixelOutputs device_outputs(const HostOutputs& out);
+    PixelOutputs device_outputs(const Frame<T>& f, const HostOutputs& out);
+    CopyOutArgs copy_out_args(const Frame<T>& f, const HostOutputs& out);
     // A key frame's lists.
     void chunk_cull(Frame<T>& f);
     void preprocess(Frame<T>& f);
@@ -112,6 +123,9 @@ struct CudaRenderer<T>::Impl {
     bool ranges_and_split(const Frame<T>& f, std::uint64_t pairs);
     void rasterize(const Frame<T>& f, TileRows rows, std::uint64_t pairs, const PixelOutputs& out);
     void merge(const Frame<T>& f, std::uint64_t pairs, const PixelOutputs& out);
+    void add_raster_times();
+    void copy_drawn_rows(const Frame<T>& f, int rows_end, const HostOutputs& out);
+    void end_copies();
     void copy_out(const Frame<T>& f, const HostOutputs& out);
     void key_rendered(const Frame<T>& f, const FrameCounters& c);
     FrameStats frame_stats(const Frame<T>& f) const;

@@ -29,10 +29,9 @@ enum class Event : int {
     split,
     rasterize,
     merge,
-    copy_start,
-    copy_out,
+    copy_out,  // the copy stream's last copy, seen from the renderer's stream
 };
-inline constexpr std::size_t kEventCount = 15;
+inline constexpr std::size_t kEventCount = 14;
 
 class StageEvents {
 public:

@@ -218,6 +218,91 @@ TEST_F(CudaRendererTest, StageTimesCoverTheFrame) {
     EXPECT_DOUBLE_EQ(stats.total_ms, stats.stage_ms.sum());
 }
 
+// copy_out copies each band of rows once its tiles are drawn, on a stream of its own, while
+// later tiles are drawn. Against the copy after the whole pass: the same bytes in every output,
+// frame after frame of alternating views (a band copied before its tiles were drawn would hold
+// the other view's pixels), in both layouts, split or not, in pair-budget bands, for cached
+// frames and for partial frames.
+TEST_F(CudaRendererTest, CopyOutOverlapsTheDrawingWithoutChangingTheImage) {
+    test::RandomSceneParams p;
+    p.count = 30000;
+    const Scene scene = test::random_scene(test::fresh_seed("overlapped copy"), p);
+    auto device_scene = std::make_shared<cuda::DeviceScene>(scene);
+    std::cout << "[copy out] stream memory waits " << (cuda::stream_memory_waits_available() ? "taken" : "refused")
+              << std::endl;
+    // Alternating views, or a steady glide where the cache is on (its cached frames).
+    auto view = [](bool glide, int frame) {
+        const double x = glide ? 0.01 * frame : 0.4 * (frame % 2);
+        return test::forward_camera(333, 250, 70.0, {x, 0.5 * x, 0.0});
+    };
+    const FrameStats one_pass = [&] {
+        FrameStats stats;
+        gpu_render(scene, view(false, 0), RenderOptions{}, &stats);
+        return stats;
+    }();
+    RenderOptions split;
+    split.catgs.split_k = 64;
+    RenderOptions cached = default_pipeline_options();
+    cached.catgs.window_cost = WindowCost::work;  // plans from work counts: both renderers plan alike
+    struct Config {
+        std::string name;
+        RenderOptions options;
+        cuda::RasterLayout layout;
+        std::uint64_t max_pairs;
+    };
+    const Config configs[] = {
+        {"one pixel a thread", RenderOptions{}, cuda::RasterLayout::pixel_per_thread, 0},
+        {"two pixels a thread", RenderOptions{}, cuda::RasterLayout::two_pixels_per_thread, 0},
+        {"split", split, cuda::RasterLayout::two_pixels_per_thread, 0},
+        {"split, one pixel", split, cuda::RasterLayout::pixel_per_thread, 0},
+        {"bands", RenderOptions{}, cuda::RasterLayout::automatic, one_pass.pairs / 3},
+        {"split bands", split, cuda::RasterLayout::automatic, one_pass.pairs / 3},
+        {"cached frames", cached, cuda::RasterLayout::automatic, 0},
+    };
+    for (const Config& c : configs) {
+        cuda::CudaLimits overlapped{c.max_pairs, c.layout, true}, after_pass{c.max_pairs, c.layout, false};
+        cuda::CudaRenderer<float> a(nullptr, overlapped), b(nullptr, after_pass);
+        a.set_scene(device_scene);
+        b.set_scene(device_scene);
+        EXPECT_FALSE(b.copies_while_drawing());
+        const bool glide = c.options.catgs.cache != CacheMode::off;
+        int banded = 0, split_frames = 0, cached_frames = 0;
+        for (int frame = 0; frame < 6; ++frame) {
+            const Camera cam = view(glide, frame);
+            ImageRGB8 a8, b8;
+            ImageF af, bf;
+            const FrameStats sa = a.render(cam, c.options, &a8, &af);
+            const FrameStats sb = b.render(cam, c.options, &b8, &bf);
+            const std::string what = c.name + ", frame " + std::to_string(frame);
+            ASSERT_EQ(a8.rgb, b8.rgb) << what;
+            ASSERT_EQ(af.rgb, bf.rgb) << what;
+            EXPECT_EQ(sa.pairs, sb.pairs) << what;
+            banded += sa.bands > 1;
+            split_frames += sa.split_tasks > 0;
+            cached_frames += !sa.key_frame;
+            EXPECT_GT(sa.stage_ms[Stage::copy_out], 0.0) << what;
+        }
+        if (c.max_pairs) {
+            EXPECT_EQ(banded, 6) << c.name;
+        }
+        if (c.options.catgs.split_k == 64) {
+            EXPECT_GT(split_frames, 0) << c.name;
+        }
+        if (glide) {
+            EXPECT_GT(cached_frames, 0) << c.name;
+        }
+        // Where the driver takes stream memory waits, every frame copied while drawing (a wait
+        // it refused mid-frame would have turned the renderer to the fallback for good).
+        EXPECT_EQ(a.copies_while_drawing(), cuda::stream_memory_waits_available()) << c.name;
+        PartialImage pa, pb;
+        a.render_partial(view(false, 1), c.options, pa);
+        b.render_partial(view(false, 1), c.options, pb);
+        EXPECT_EQ(pa.colour, pb.colour) << c.name << ", partial";
+        EXPECT_EQ(pa.transmittance, pb.transmittance) << c.name << ", partial";
+        EXPECT_EQ(pa.stopped, pb.stopped) << c.name << ", partial";
+    }
+}
+
 TEST_F(CudaRendererTest, DoublePrecisionMatchesCpuDouble) {
     test::RandomSceneParams p;
     p.count = 5000;

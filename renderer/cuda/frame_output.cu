@@ -1,0 +1,129 @@
+// The frame's pixels from the kernels to the caller: where rasterize and merge write them,
+// and copy_out (copy_out.cuh), each band of tile rows copied on the copy stream once its tiles
+// are drawn and taken into the caller's image once it is on the host, while the rest of the
+// frame is still drawn and copied.
+#include <cuda_runtime_api.h>
+
+#include <algorithm>
+#include <cstddef>
+
+#include "copy_out.cuh"
+#include "cuda_check.hpp"
+#include "cuda_renderer.hpp"
+#include "renderer_state.cuh"
+
+namespace catgs::cuda {
+
+template <typename T>
+PixelOutputs CudaRenderer<T>::Impl::device_outputs(const Frame<T>& f, const HostOutputs& out) {
+    PixelBuffers<T>& p = buffers.pixels;
+    return PixelOutputs{out.rgb8 ? p.image_rgb8.data() : nullptr,
+                        out.rgb || out.partial ? p.image_float.data() : nullptr,
+                        out.partial ? p.image_transmittance.data() : nullptr,
+                        out.partial ? p.image_stopped.data() : nullptr,
+                        copy_waits_on_counts() ? copy.tiles_drawn : nullptr,
+                        rows_per_copy_band(f)};
+}
+
+template <typename T>
+CopyOutArgs CudaRenderer<T>::Impl::copy_out_args(const Frame<T>& f, const HostOutputs& out) {
+    const PixelOutputs device = device_outputs(f, out);
+    return CopyOutArgs{f.view.width, device.rgb8,     device.rgb,          device.transmittance, device.stopped,
+                       &host.rgb8,   &host.rgb_float, &host.transmittance, &host.stopped};
+}
+
+/// The copy bands whose tile rows lie below `rows_end`, now that the pass drawing them is
+/// enqueued: each waits on its tile count, or, without stream memory waits, on an event after
+/// the pass. Waits come only after the launches that satisfy them, so no stream can block a
+/// launch its own wait needs.
+template <typename T>
+void CudaRenderer<T>::Impl::copy_drawn_rows(const Frame<T>& f, int rows_end, const HostOutputs& out) {
+    const int per_band = rows_per_copy_band(f);
+    const CopyOutArgs args = copy_out_args(f, out);
+    bool after_pass = false;  // the fallback's event is recorded once a pass
+    for (; copied_copy_bands * per_band < f.view.tiles_y; ++copied_copy_bands) {
+        const int band = copied_copy_bands;
+        const int begin = band * per_band, end = std::min(begin + per_band, f.view.tiles_y);
+        if (end > rows_end) break;
+        const cudaStream_t s = copy.band[band];
+        CATGS_CUDA_CHECK(cudaStreamWaitEvent(s, copy.ready, 0));
+        const unsigned int tiles = static_cast<unsigned int>((end - begin) * f.view.tiles_x);
+        const bool counted = copy_waits_on_counts();
+        if (!counted || !wait_for_count(s, &copy.tiles_drawn[band], tiles)) {
+            if (counted) copy_waits = false;  // the driver refused: later frames count nothing
+            if (!after_pass) CATGS_CUDA_CHECK(cudaEventRecord(copy.drawn, stream));
+            after_pass = true;
+            CATGS_CUDA_CHECK(cudaStreamWaitEvent(s, copy.drawn, 0));
+        }
+        cuda::copy_out(args, begin * kTileSize, std::min(end * kTileSize, f.view.height), s);
+        CATGS_CUDA_CHECK(cudaEventRecord(copy.copied[band], s));
+    }
+}
+
+/// The renderer's stream waits for the last copy; copy_out's time runs from the last pass's
+/// merge mark, so it is the part of the copy the drawing did not hide.
+template <typename T>
+void CudaRenderer<T>::Impl::end_copies() {
+    for (int band = 0; band < copied_copy_bands; ++band)
+        CATGS_CUDA_CHECK(cudaStreamWaitEvent(stream, copy.copied[band], 0));
+    events.record(Event::copy_out, stream);
+    CATGS_CUDA_CHECK(cudaMemcpyAsync(host.counters.data(), buffers.window.counters.data(), sizeof(Counters),
+                                     cudaMemcpyDeviceToHost, stream));
+}
+
+/// The image into the caller's buffers, each copy band as soon as it is on the host (the rest
+/// are still being drawn or copied), then the frame's counters (end_copies enqueued them).
+template <typename T>
+void CudaRenderer<T>::Impl::copy_out(const Frame<T>& f, const HostOutputs& out) {
+    const int width = f.view.width, height = f.view.height;
+    // Sized, not cleared: every value is overwritten below, and a stream of frames reuses them.
+    if (out.rgb8) {
+        out.rgb8->width = width;
+        out.rgb8->height = height;
+        out.rgb8->rgb.resize(3 * f.pixels);
+    }
+    if (out.rgb) {
+        out.rgb->width = width;
+        out.rgb->height = height;
+        out.rgb->rgb.resize(3 * f.pixels);
+    }
+    if (out.partial) {
+        PartialImage& p = *out.partial;
+        p.width = width;
+        p.height = height;
+        p.colour.resize(3 * f.pixels);
+        p.transmittance.resize(f.pixels);
+        p.stopped.resize(f.pixels);
+    }
+    const int per_band = rows_per_copy_band(f) * kTileSize;
+    for (int band = 0; band * per_band < height; ++band) {
+        CATGS_CUDA_CHECK(cudaEventSynchronize(copy.copied[band]));
+        const std::size_t first = static_cast<std::size_t>(band) * per_band * width;
+        const std::size_t count = static_cast<std::size_t>(std::min(per_band, height - band * per_band)) * width;
+        auto take = [&](auto* host_values, auto& values, std::size_t channels) {
+            std::copy_n(host_values + channels * first, channels * count, values.data() + channels * first);
+        };
+        if (out.rgb8) take(host.rgb8.data(), out.rgb8->rgb, 3);
+        if (out.rgb) take(host.rgb_float.data(), out.rgb->rgb, 3);
+        if (out.partial) {
+            take(host.rgb_float.data(), out.partial->colour, 3);
+            take(host.transmittance.data(), out.partial->transmittance, 1);
+            take(host.stopped.data(), out.partial->stopped, 1);
+        }
+    }
+    CATGS_CUDA_CHECK(cudaStreamSynchronize(stream));
+    events.add(Stage::copy_out, Event::merge, Event::copy_out);
+}
+
+template PixelOutputs CudaRenderer<float>::Impl::device_outputs(const Frame<float>&, const HostOutputs&);
+template PixelOutputs CudaRenderer<double>::Impl::device_outputs(const Frame<double>&, const HostOutputs&);
+template CopyOutArgs CudaRenderer<float>::Impl::copy_out_args(const Frame<float>&, const HostOutputs&);
+template CopyOutArgs CudaRenderer<double>::Impl::copy_out_args(const Frame<double>&, const HostOutputs&);
+template void CudaRenderer<float>::Impl::copy_drawn_rows(const Frame<float>&, int, const HostOutputs&);
+template void CudaRenderer<double>::Impl::copy_drawn_rows(const Frame<double>&, int, const HostOutputs&);
+template void CudaRenderer<float>::Impl::end_copies();
+template void CudaRenderer<double>::Impl::end_copies();
+template void CudaRenderer<float>::Impl::copy_out(const Frame<float>&, const HostOutputs&);
+template void CudaRenderer<double>::Impl::copy_out(const Frame<double>&, const HostOutputs&);
+
+}  // namespace catgs::cuda
