@@ -218,12 +218,26 @@ int check_row_spans(const std::vector<Projected<T>>& poses, int width, int heigh
                     int& touched, const std::string& where) {
     const View<T> view = stage::image_view<T>(width, height);
     std::vector<int> emitted(static_cast<std::size_t>(view.tiles_x * view.tiles_y), 0);
+    std::vector<std::uint32_t> sequence;
     Projected<T> window[kMaxWindow];
     std::copy(poses.begin(), poses.end(), window);
     const std::uint32_t valid = (1u << poses.size()) - 1u;
-    const std::uint32_t n =
-        for_each_window_tile<kMaxWindow>(window, valid, static_cast<int>(poses.size()), Culling::opacity_aware,
-                                         static_cast<T>(guard), view, [&](std::uint32_t t) { ++emitted[t]; });
+    const int size = static_cast<int>(poses.size());
+    const std::uint32_t n = for_each_window_tile<kMaxWindow>(window, valid, size, Culling::opacity_aware,
+                                                             static_cast<T>(guard), view, [&](std::uint32_t t) {
+                                                                 ++emitted[t];
+                                                                 sequence.push_back(t);
+                                                             });
+    if (size <= kUnrolledWindow) {
+        // The small windows' unrolled instance (the GPU's kernels for W <= kUnrolledWindow)
+        // emits the same tiles in the same order.
+        std::vector<std::uint32_t> unrolled;
+        const std::uint32_t m =
+            for_each_window_tile<kUnrolledWindow>(window, valid, size, Culling::opacity_aware, static_cast<T>(guard),
+                                                  view, [&](std::uint32_t t) { unrolled.push_back(t); });
+        EXPECT_EQ(m, n) << where << " (unrolled instance)";
+        EXPECT_EQ(unrolled, sequence) << where << " (unrolled instance)";
+    }
     int near_level = 0, counted = 0;
     for (int ty = 0; ty < view.tiles_y; ++ty)
         for (int tx = 0; tx < view.tiles_x; ++tx) {
@@ -266,15 +280,18 @@ TEST(StageTiles, RowSpansAreTheTilesThePerTileTestTouches) {
     for (int i = 0; i < 1200; ++i) {
         const int width = static_cast<int>(stage::uniform(rng, 17, 400)),
                   height = static_cast<int>(stage::uniform(rng, 17, 300));
-        const int window = i % 3 == 0 ? static_cast<int>(stage::uniform(rng, 2, 6)) : 1;
+        const int window = i % 3 == 0 ? static_cast<int>(stage::uniform(rng, 2, 6)) : i % 3 == 1 ? 1 : 2;
         std::vector<Projected<float>> pf;
         const Projected<float> first = stage::random_projected<float>(rng, width, height);
         for (int k = 0; k < window; ++k) {
             // A window's poses see the same Gaussian a little moved and reshaped.
             Projected<float> g = k == 0 ? first : stage::random_projected<float>(rng, width, height);
             if (k > 0) {
-                g.mean = {first.mean.x + static_cast<float>(stage::uniform(rng, -20, 20)),
-                          first.mean.y + static_cast<float>(stage::uniform(rng, -20, 20))};
+                // Every sixth window moves far enough that a small footprint's spans of one
+                // row fall apart (the union is then several runs of tiles).
+                const double move = i % 6 == 3 ? 80 : 20;
+                g.mean = {first.mean.x + static_cast<float>(stage::uniform(rng, -move, move)),
+                          first.mean.y + static_cast<float>(stage::uniform(rng, -move, move))};
                 g.opacity = first.opacity;
             }
             pf.push_back(g);

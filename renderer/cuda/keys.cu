@@ -1,6 +1,7 @@
 #include "keys.cuh"
 
 #include <algorithm>
+#include <type_traits>
 
 #include "catgs/stages/keys.hpp"
 #include "cuda_check.hpp"
@@ -98,15 +99,20 @@ __global__ void count_band_kernel(ChunkSpace space, const Projected<T>* projecte
 template <typename T>
 void keys(const KeysArgs<T>& a, cudaStream_t s) {
     if (a.ordered == 0) return;
-    const unsigned blocks = blocks_for(a.ordered, kThreads);
-    if (a.window == 1)
-        keys_kernel<T, 1><<<blocks, kThreads, 0, s>>>(a.scene, a.space, a.views, 1, a.culling, a.guard, a.projected,
-                                                      a.touched, a.offsets, a.order, a.ordered, a.emission_offset,
-                                                      a.rows, a.band, a.reprojected, a.capacity, a.keys, a.values);
-    else
-        keys_kernel<T, kMaxWindow><<<blocks, kThreads, 0, s>>>(
+    const auto launch = [&](auto kernel) {
+        kernel<<<blocks_for(a.ordered, kThreads), kThreads, 0, s>>>(
             a.scene, a.space, a.views, a.window, a.culling, a.guard, a.projected, a.touched, a.offsets, a.order,
             a.ordered, a.emission_offset, a.rows, a.band, a.reprojected, a.capacity, a.keys, a.values);
+    };
+    // Small windows get their own unrolled instance (tiles.hpp, kUnrolledWindow); in double,
+    // which serves the tests only, it would spill.
+    constexpr int kSmallWindow = std::is_same_v<T, float> ? kUnrolledWindow : kMaxWindow;
+    if (a.window == 1)
+        launch(keys_kernel<T, 1>);
+    else if (a.window <= kUnrolledWindow)
+        launch(keys_kernel<T, kSmallWindow>);
+    else
+        launch(keys_kernel<T, kMaxWindow>);
     CATGS_CUDA_CHECK_LAUNCH("keys_kernel");
 }
 
