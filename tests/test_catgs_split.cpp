@@ -201,6 +201,29 @@ TEST(SplitChooser, TakesTheSideWithTheLowerMeasuredRasterizeCostAndProbesTheOthe
     EXPECT_TRUE(per_pair.choose(o));
 }
 
+// What splitting costs in copy_out counts against it: split frames that draw as fast as whole
+// ones but leave their copy waiting for merge lose.
+TEST(SplitChooser, ExposedCopyTimeCountsAgainstTheSideThatCausesIt) {
+    const CatgsOptions o = timed_split_options();
+    SplitChooser chooser;
+    FrameStats split = measured(1.7, 0.05, 1000000), whole = measured(1.75, 0, 1000000);
+    split.stage_ms[Stage::copy_out] = 0.33;
+    whole.stage_ms[Stage::copy_out] = 0.04;
+    ASSERT_TRUE(chooser.choose(o));
+    chooser.learn(true, split);
+    ASSERT_FALSE(chooser.choose(o));
+    chooser.learn(false, whole);
+    EXPECT_NEAR(chooser.split_cost().value(), 2.08, 1e-12);
+    EXPECT_NEAR(chooser.whole_cost().value(), 1.79, 1e-12);
+    int splits = 0;
+    for (int i = 0; i < 4 * kSplitProbeEvery; ++i) {
+        const bool s = chooser.choose(o);
+        splits += s;
+        chooser.learn(s, s ? split : whole);
+    }
+    EXPECT_EQ(splits, 4) << "only the probes, one in kSplitProbeEvery, split";
+}
+
 // A choice explores on its side's first frame and on probes, and only then; through the
 // planner, such a frame's cost is not learned by the window cost model: at 4K the first frame
 // splits and costs more than plain frames will, and learned as plain's cost it made losing

@@ -26,7 +26,9 @@ bool SplitChooser::choose(const CatgsOptions& options) {
 
 void SplitChooser::learn(bool split, const FrameStats& stats) {
     if (!measured_ || stats.pairs == 0) return;
-    const double ms = stats.stage_ms[Stage::rasterize] + stats.stage_ms[Stage::merge];
+    // copy_out too: the bands of tile rows it copies while the frame is drawn wait for merge
+    // wherever a tile of theirs was split, so splitting also shows as exposed copy time.
+    const double ms = stats.stage_ms[Stage::rasterize] + stats.stage_ms[Stage::merge] + stats.stage_ms[Stage::copy_out];
     if (!(ms > 0)) return;
     (split ? split_ : whole_)
         .add(ms * 1e6 / static_cast<double>(stats.pairs), decisions_, probing_ ? kSplitProbeWeight : kSplitCostWeight);

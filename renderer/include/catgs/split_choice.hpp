@@ -9,8 +9,12 @@
 // list lengths alone separated the two, so the choice is learned per path.
 //
 // The rule. Each side (split, whole) keeps an exponentially weighted average of rasterize +
-// merge milliseconds per million rendered pairs, which follows the content without mixing
-// dense and sparse frames. A frame that builds task lists (a key frame, or a cached frame that
+// merge + copy_out milliseconds per million rendered pairs, which follows the content without
+// mixing dense and sparse frames. copy_out counts because the GPU copies each band of tile rows
+// while the rest is drawn, except where a split tile holds the band back until merge: on the
+// kit's 4K paths split frames drew in about the same time as whole ones but exposed 0.29 ms
+// more copy, and learned from rasterize + merge alone the chooser kept splitting (H200,
+// 2026-12-04). A frame that builds task lists (a key frame, or a cached frame that
 // re-sorts) splits while split is the cheaper side, or while either side is unmeasured (split
 // first: it is what the options ask for). Every kSplitProbeEvery-th such frame renders the other
 // side to keep its estimate fresh, which costs at most that share of the difference, and only
