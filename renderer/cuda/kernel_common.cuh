@@ -4,11 +4,13 @@
 #pragma once
 
 #include <cstdint>
+#include <type_traits>
 
 #include "catgs/constants.hpp"
 #include "catgs/scene.hpp"
 #include "catgs/stages/blend.hpp"
 #include "catgs/stages/project.hpp"
+#include "catgs/stages/tiles.hpp"
 #include "catgs/stages/view.hpp"
 
 namespace catgs::cuda {
@@ -23,6 +25,12 @@ inline constexpr std::uint32_t kNoSlot = 0xffffffffu;
 /// 16 the copy left after the last pixel is drawn is a sixteenth of the image (about 30 us at
 /// 4K), and the 16 waits cost the copy stream nothing measurable.
 inline constexpr int kMaxCopyBands = 16;
+
+/// The kernel instance of preprocess and keys for windows of 2..kUnrolledWindow poses, unrolled
+/// over its poses (tiles.hpp); in double, which serves the tests only, it would spill, so double
+/// takes the general instance.
+template <typename T>
+inline constexpr int kSmallWindow = std::is_same_v<T, float> ? kUnrolledWindow : kMaxWindow;
 
 inline unsigned blocks_for(std::uint64_t n, int threads) {
     return static_cast<unsigned>((n + threads - 1) / threads);

@@ -1,7 +1,6 @@
 #include "keys.cuh"
 
 #include <algorithm>
-#include <type_traits>
 
 #include "catgs/stages/keys.hpp"
 #include "cuda_check.hpp"
@@ -104,13 +103,10 @@ void keys(const KeysArgs<T>& a, cudaStream_t s) {
             a.scene, a.space, a.views, a.window, a.culling, a.guard, a.projected, a.touched, a.offsets, a.order,
             a.ordered, a.emission_offset, a.rows, a.band, a.reprojected, a.capacity, a.keys, a.values);
     };
-    // Small windows get their own unrolled instance (tiles.hpp, kUnrolledWindow); in double,
-    // which serves the tests only, it would spill.
-    constexpr int kSmallWindow = std::is_same_v<T, float> ? kUnrolledWindow : kMaxWindow;
     if (a.window == 1)
         launch(keys_kernel<T, 1>);
     else if (a.window <= kUnrolledWindow)
-        launch(keys_kernel<T, kSmallWindow>);
+        launch(keys_kernel<T, kSmallWindow<T>>);
     else
         launch(keys_kernel<T, kMaxWindow>);
     CATGS_CUDA_CHECK_LAUNCH("keys_kernel");

@@ -3,8 +3,6 @@
 #include <cub/block/block_reduce.cuh>
 #include <cuda/functional>
 
-#include <type_traits>
-
 #include "catgs/stages/envelope.hpp"
 #include "catgs/stages/footprint.hpp"
 #include "catgs/stages/keys.hpp"
@@ -24,9 +22,6 @@ namespace {
 template <typename T>
 constexpr int kSingleMinBlocks = sizeof(T) == 4 ? 3 : 1;
 constexpr int kSummarizeThreads = 128;
-// Small windows' instance (tiles.hpp, kUnrolledWindow); double serves the tests only.
-template <typename T>
-constexpr int kSmallWindow = std::is_same_v<T, float> ? kUnrolledWindow : kMaxWindow;
 
 // The SH colour of a Gaussian that touches a tile. At degree 3 its 48 coefficients (192 bytes,
 // 16-byte aligned in DeviceScene's own allocation) are fetched as 12 float4 loads instead of 48
@@ -175,7 +170,7 @@ void preprocess(const PreprocessArgs<T>& a, cudaStream_t s) {
         launch(preprocess_kernel<T, 1, false, kThreads, kSingleMinBlocks<T>>, kThreads, 1);
     else if (a.window == 1)
         launch(preprocess_kernel<T, 1, true, kSummarizeThreads, 1>, kSummarizeThreads, 1);
-    else if (a.window <= kUnrolledWindow)  // its own unrolled instance (tiles.hpp), as keys.cu
+    else if (a.window <= kUnrolledWindow)
         launch(preprocess_kernel<T, kSmallWindow<T>, true, kThreads, 1>, kThreads, a.window);
     else
         launch(preprocess_kernel<T, kMaxWindow, true, kThreads, 1>, kThreads, a.window);

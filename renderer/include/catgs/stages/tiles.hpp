@@ -214,6 +214,13 @@ CATGS_HD bool touches_tile(const Projected<T>& g, Culling mode, const View<T>& v
 /// city at 4K: 11.2 against 9.8 ms, H200, 2026-12-04).
 inline constexpr int kUnrolledWindow = 2;
 
+/// How far a loop over a window's poses runs: to the constant MaxWindow in the unrolled
+/// instances (testing k < window inside), to the window's size otherwise.
+template <int MaxWindow>
+CATGS_HD int pose_loop_bound(int window) {
+    return MaxWindow <= kUnrolledWindow ? MaxWindow : window;
+}
+
 /// The tiles of one row in the union of MaxWindow spans (the first `window` of them), as
 /// maximal runs from `start` (the leftmost span's first tile) left to right; `none` is past
 /// every span. Returns how many.
@@ -250,7 +257,7 @@ template <int MaxWindow, typename T, typename Emit>
 CATGS_HD std::uint32_t window_union_tiles(const Projected<T>* poses, const TileRect* rects, const TileRect& u,
                                           int window, Culling mode, T guard, const View<T>& view, Emit& emit) {
     constexpr bool kUnrolled = MaxWindow <= kUnrolledWindow;
-    const int poses_n = kUnrolled ? MaxWindow : window;
+    const int poses_n = pose_loop_bound<MaxWindow>(window);
     EllipseRows<T> ellipses[kUnrolled ? MaxWindow : 1];
     if constexpr (kUnrolled)
         for (int k = 0; k < MaxWindow; ++k)
@@ -309,7 +316,7 @@ CATGS_HD std::uint32_t for_each_window_tile(const Projected<T>* poses, std::uint
     }
     TileRect rects[MaxWindow];
     TileRect u{view.tiles_x, view.tiles_y, 0, 0};
-    const int poses_n = MaxWindow <= kUnrolledWindow ? MaxWindow : window;
+    const int poses_n = pose_loop_bound<MaxWindow>(window);
     for (int k = 0; k < poses_n; ++k) {
         rects[k] = k < window && (valid >> k & 1u) ? tile_rect(poses[k], mode, view.tiles_x, view.tiles_y, guard)
                                                    : TileRect{0, 0, 0, 0};
