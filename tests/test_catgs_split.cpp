@@ -74,9 +74,11 @@ TEST(CatgsSplit, TasksAreTilesPlusLabelledExtras) {
 // stop: the unsplit blend stops before the Gaussian that would take T below 1e-4 (graphdeco's
 // rule), which can leave out up to T alpha < 0.01 of a pixel's light (2.5 levels for colour 1,
 // more for SH colours above 1); a later sub-task cannot know the T in front of it and blends
-// that Gaussian, and the merge adds it. On this scene of colours in [0, 1] the image stays
-// within one 8-bit level of the unsplit one in every culling mode and for several k; the
-// stress suite (kSplitFewLevels in test_stress.cpp) bounds the adversarial cases at 3 levels.
+// that Gaussian, and the merge adds it. On this scene of colours in [0, 1] that is at most
+// 2.55 levels, 3 after rounding (kSplitMaxLevels), as the stress suite bounds it
+// (kSplitFewLevels in test_stress.cpp); most seeds stay within one level, about 3% of them
+// reach 2 (one pixel whose stop moved), so one level was no bound.
+constexpr int kSplitMaxLevels = 3;
 TEST(CatgsSplit, SplittingDoesNotChangeTheImage) {
     const Scene scene = dense_scene("split equivalence");
     const Camera cam = test::forward_camera(96, 64, 60.0);
@@ -91,7 +93,7 @@ TEST(CatgsSplit, SplittingDoesNotChangeTheImage) {
             FrameStats s;
             const ImageError e = compare(render_once(scene, cam, split, &s), unsplit);
             EXPECT_GT(s.split_tasks, 0u);
-            EXPECT_LE(e.max_abs, 1) << culling_name(mode) << " k=" << k << " psnr " << e.psnr;
+            EXPECT_LE(e.max_abs, kSplitMaxLevels) << culling_name(mode) << " k=" << k << " psnr " << e.psnr;
             EXPECT_GE(e.psnr, 60.0) << culling_name(mode) << " k=" << k;
         }
     }
@@ -277,8 +279,8 @@ TEST(SplitChooser, SplitsAsTheOptionsSayWithoutTimingsAndNeverWithoutK) {
 }
 
 // On the CPU backend, through the planner: a frame the chooser keeps whole has no extra
-// tasks where the same frame split has, and draws the image splitting draws (within one 8-bit
-// level: CatgsSplit.SplittingDoesNotChangeTheImage says why).
+// tasks where the same frame split has, and draws the image splitting draws (within
+// kSplitMaxLevels: CatgsSplit.SplittingDoesNotChangeTheImage says why).
 TEST(SplitChooser, AFrameKeptWholeByThePlannerHasNoSubtasks) {
     const Scene scene = dense_scene("split chooser frames");
     const Camera cam = test::forward_camera(96, 64, 60.0);
@@ -293,7 +295,7 @@ TEST(SplitChooser, AFrameKeptWholeByThePlannerHasNoSubtasks) {
     EXPECT_EQ(b.split_tasks, 0u);  // then whole, to measure it
     EXPECT_EQ(b.split_k, 0u);
     const ImageError e = compare(to_rgb8(first), to_rgb8(second));
-    EXPECT_LE(e.max_abs, 1);
+    EXPECT_LE(e.max_abs, kSplitMaxLevels);
     EXPECT_GE(e.psnr, 60.0);
     EXPECT_TRUE(renderer.planner().split_chooser().split_cost().known());
     EXPECT_TRUE(renderer.planner().split_chooser().whole_cost().known());
