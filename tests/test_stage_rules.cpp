@@ -215,7 +215,9 @@ void check_straight_line_blend(const char* name) {
     int drawn = 0, stopped = 0, refused = 0;
     for (int pixel = 0; pixel < 2000; ++pixel) {
         PixelAccumulator<T> straight, branchy;
-        const T min_t = rng() % 2 ? static_cast<T>(kMinTransmittance) : T(0.3) * unit(rng);
+        SignedPixel<T> signed_pixel;
+        // Thresholds down to 0 (a split tile's tail may be anything >= 0 in the library's options).
+        const T min_t = rng() % 2 ? static_cast<T>(kMinTransmittance) : rng() % 8 == 0 ? T(0) : T(0.3) * unit(rng);
         for (int g = 0; g < 40; ++g) {
             const T opacity = rng() % 10 == 0 ? T(0) : unit(rng);
             const T power = power_of(opacity);
@@ -223,7 +225,15 @@ void check_straight_line_blend(const char* name) {
             const PixelAccumulator<T> before = branchy;
             blend_power_unless_done(straight, power, opacity, c, min_t, [](T v) { return std::exp(v); });
             branchy_blend(branchy, power, opacity, c, min_t);
+            blend_power_signed(signed_pixel, power, opacity, c, min_t, [](T v) { return std::exp(v); });
             ASSERT_EQ(straight.done, branchy.done) << name << " pixel " << pixel << " gaussian " << g;
+            const PixelAccumulator<T> from_signed = signed_pixel.accumulator();
+            ASSERT_EQ(from_signed.done, branchy.done) << name << " signed, pixel " << pixel << " gaussian " << g;
+            ASSERT_TRUE(test::stage::same_bits(from_signed.transmittance, branchy.transmittance))
+                << name << " signed, pixel " << pixel;
+            ASSERT_TRUE(test::stage::same_bits(from_signed.colour.x, branchy.colour.x)) << name << " signed " << pixel;
+            ASSERT_TRUE(test::stage::same_bits(from_signed.colour.y, branchy.colour.y)) << name << " signed " << pixel;
+            ASSERT_TRUE(test::stage::same_bits(from_signed.colour.z, branchy.colour.z)) << name << " signed " << pixel;
             ASSERT_TRUE(test::stage::same_bits(straight.transmittance, branchy.transmittance))
                 << name << " pixel " << pixel;
             ASSERT_TRUE(test::stage::same_bits(straight.colour.x, branchy.colour.x)) << name << " pixel " << pixel;
@@ -238,6 +248,16 @@ void check_straight_line_blend(const char* name) {
     EXPECT_GT(drawn, 1000) << name;
     EXPECT_GT(stopped, 100) << name;
     EXPECT_GT(refused, 1000) << name;
+}
+
+TEST(Blend, SignedPixelOutsideTheImageStaysDone) {
+    SignedPixel<float> outside = SignedPixel<float>::starting(false);
+    ASSERT_TRUE(outside.done());
+    for (const float min_t : {0.0f, static_cast<float>(kMinTransmittance), 0.5f})
+        blend_power_signed(outside, 0.0f, 0.9f, Vec3<float>{1, 1, 1}, min_t, [](float v) { return std::exp(v); });
+    EXPECT_TRUE(outside.done());
+    EXPECT_EQ(outside.accumulator().transmittance, 1.0f);
+    EXPECT_EQ(outside.colour.x, 0.0f) << "a done pixel draws nothing";
 }
 
 TEST(Blend, StraightLineCodeIsGraphdecosBranchyRule) {

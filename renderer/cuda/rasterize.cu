@@ -87,10 +87,10 @@ __device__ std::uint32_t blocks_reached(const Projected<T>& p, int tile_x, int t
 
 /// Whether every pixel a thread owns is done.
 template <typename T, int Pixels>
-__device__ bool all_done(const PixelAccumulator<T> (&acc)[Pixels]) {
+__device__ bool all_done(const SignedPixel<T> (&acc)[Pixels]) {
     bool done = true;
 #pragma unroll
-    for (int b = 0; b < Pixels; ++b) done &= acc[b].done;
+    for (int b = 0; b < Pixels; ++b) done &= acc[b].done();
     return done;
 }
 
@@ -179,11 +179,11 @@ __global__ void __launch_bounds__(PixelLayout<Pixels>::kThreads, resident_blocks
     if (slot != kNoSlot) subtask_range(begin, end, counters->split_k, index, begin, end);
     const T threshold = index > 0 ? tail_transmittance : static_cast<T>(kMinTransmittance);
 
-    PixelAccumulator<T> acc[Pixels];
+    SignedPixel<T> acc[Pixels];
 #pragma unroll
     for (int b = 0; b < Pixels; ++b)
-        acc[b].done = !(px[b % Layout::kCols] < static_cast<T>(view.width) &&
-                        py[b / Layout::kCols] < static_cast<T>(view.height));
+        acc[b] = SignedPixel<T>::starting(px[b % Layout::kCols] < static_cast<T>(view.width) &&
+                                          py[b / Layout::kCols] < static_cast<T>(view.height));
     for (std::uint64_t start = begin; start < end; start += kBatch) {
         if (__syncthreads_count(all_done(acc)) == kThreads) break;
 #pragma unroll
@@ -215,7 +215,7 @@ __global__ void __launch_bounds__(PixelLayout<Pixels>::kThreads, resident_blocks
                     const T power = AlphaMath<T>::power(s, px[b % Layout::kCols], rows[b / Layout::kCols]);
                     // blend's tests decide (its power <= 0 holds in either domain); in float only
                     // rounding at alpha = 1/255 and the hardware exp's last bits can differ.
-                    blend_power_unless_done(acc[b], power, s.opacity, s.colour, threshold, AlphaMath<T>{});
+                    blend_power_signed(acc[b], power, s.opacity, s.colour, threshold, AlphaMath<T>{});
                 }
             }
         }
@@ -225,13 +225,14 @@ __global__ void __launch_bounds__(PixelLayout<Pixels>::kThreads, resident_blocks
         const int x = tile_x * kTileSize + (layout.first_col + b % Layout::kCols) * kWarpBlockW + lane % kWarpBlockW;
         const int y = tile_y * kTileSize + (layout.first_row + b / Layout::kCols) * kWarpBlockH + lane / kWarpBlockW;
         if (x >= view.width || y >= view.height) continue;
+        const PixelAccumulator<T> pixel = acc[b].accumulator();
         if (slot == kNoSlot) {
-            write_pixel(acc[b], background, static_cast<std::size_t>(y) * view.width + x, out);
+            write_pixel(pixel, background, static_cast<std::size_t>(y) * view.width + x, out);
         } else {
             const int rank =
                 (y - tile_y * kTileSize) * kTileSize + (x - tile_x * kTileSize);  // the merge's pixel index
             partials[(static_cast<std::size_t>(slot) + index) * kTilePixels + rank] =
-                Partial<T>{acc[b].colour, acc[b].transmittance};
+                Partial<T>{pixel.colour, pixel.transmittance};
         }
     }
     if (slot == kNoSlot) tile_drawn(out, tile_y);  // a split tile is drawn by merge

@@ -216,6 +216,41 @@ TEST_F(CudaStagesTest, DoubleStagesEqualTheCpuStages) {
         }
 }
 
+// Footprints of hundreds of tiles and more tile rows than a warp has lanes (the regime where one
+// thread's emission holds its warp, and where any warp-shared emission would have to agree with
+// the host): the same pairs in the same order as the CPU's.
+TEST_F(CudaStagesTest, DoubleStagesEqualTheCpuStagesOnLargeFootprints) {
+    const Camera camera = test::forward_camera(360, 1100, 75.0);
+    test::RandomSceneParams p;
+    p.count = 3000;
+    p.extent = 2.5;
+    p.log_scale_min = -2.5;
+    p.log_scale_max = 0.7;  // about 1,800 footprints of more than 32 tiles, 50-70 of more than 32 rows
+    const Scene host = test::random_scene(test::fresh_seed("cuda stages large footprints"), p);
+    const auto device = std::make_shared<cuda::DeviceScene>(host);
+    const View<double> view = make_view<double>(camera, host.origin);
+    for (const Case& c : cases()) {
+        if (c.options.culling == Culling::exact) continue;  // one shared list: nothing per footprint
+        Both<double> both;
+        both.gpu.set_scene(device);
+        both.render(host, camera, c.options);
+        const std::string what = "double large footprints " + c.name;
+        expect_identical_stages(both.cpu, both.stages, view, what);
+        std::map<std::uint32_t, std::set<std::uint32_t>> rows_of;  // Gaussian -> its tile rows
+        std::map<std::uint32_t, std::size_t> tiles_of;
+        for (std::size_t i = 0; i < both.cpu.sorted_keys().size(); ++i) {
+            const std::uint32_t g = both.cpu.sorted_values()[i];
+            rows_of[g].insert(key_tile(both.cpu.sorted_keys()[i]) / static_cast<std::uint32_t>(view.tiles_x));
+            ++tiles_of[g];
+        }
+        std::size_t large = 0, tall = 0;
+        for (const auto& [g, n] : tiles_of) large += n > 32;
+        for (const auto& [g, rows] : rows_of) tall += rows.size() > 32;
+        EXPECT_GT(large, 500u) << what << ": footprints of more than 32 tiles";
+        EXPECT_GT(tall, 10u) << what << ": footprints of more than 32 tile rows";
+    }
+}
+
 // The speculative cache: key frames with a window of poses (union footprints), and cached
 // frames that re-key, park and re-sort the key frame's pairs. The run stops at the first frame
 // the two planners plan differently (their key-frame summaries are reduced in different
