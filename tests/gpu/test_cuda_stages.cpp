@@ -67,7 +67,8 @@ struct Case {
 };
 
 /// Every culling mode with lists per tile, plain and split (a fixed k that splits nearly every
-/// tile, and the automatic k); exact culling (one shared list) unsplit.
+/// tile, and the automatic k; opacity-aware k = 8 also with a tail threshold of its own); exact
+/// culling (one shared list) unsplit.
 std::vector<Case> cases() {
     std::vector<Case> out;
     for (Culling culling : {Culling::opacity_aware, Culling::bbox3sigma}) {
@@ -84,6 +85,12 @@ std::vector<Case> cases() {
                 c.name += " split-auto";
             }
             out.push_back(c);
+            if (culling == Culling::opacity_aware && split == 1) {
+                // Later sub-tasks stopping at their own threshold: the rasterizer's other instance.
+                c.options.catgs.split_tail_transmittance = 1e-2;
+                c.name += " tail1e-2";
+                out.push_back(c);
+            }
         }
     }
     Case exact;

@@ -105,6 +105,11 @@ template <typename T>
 CATGS_INLINE T log_of(T v) {
     return CATGS_MATH_NS::log(v);
 }
+/// fabs: on the GPU a modifier of the instruction that reads it (-fabs(v) is one FADD).
+template <typename T>
+CATGS_INLINE T fabs_of(T v) {
+    return CATGS_MATH_NS::fabs(v);
+}
 template <typename T>
 CATGS_INLINE T floor_of(T v) {
     return CATGS_MATH_NS::floor(v);
