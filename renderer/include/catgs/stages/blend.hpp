@@ -31,6 +31,23 @@ CATGS_INLINE T min_visible_power(T opacity) {
     return log_of(static_cast<T>(kMinAlpha) / opacity);
 }
 
+/// graphdeco's alpha, min(0.99, opacity * exp(power)), and whether the Gaussian shows at all:
+/// power <= 0 and the unclamped alpha >= 1/255.
+template <typename T>
+struct BlendAlpha {
+    T alpha;
+    bool visible;
+};
+template <typename T, typename ExpFn>
+CATGS_HD BlendAlpha<T> blend_alpha(T power, T opacity, ExpFn exp_fn) {
+    const T raw_alpha = opacity * exp_fn(power);
+    // Written so that NaN fails both tests: far off-screen means can make the quadratic form
+    // inf - inf, and min(0.99, NaN) would otherwise draw a NaN alpha as 0.99. `&` rather than
+    // `&&`: every operand is a comparison already made, nothing to short-circuit.
+    const bool visible = (power <= T(0)) & (raw_alpha >= static_cast<T>(kMinAlpha));
+    return {raw_alpha < static_cast<T>(kMaxAlpha) ? raw_alpha : static_cast<T>(kMaxAlpha), visible};
+}
+
 /// blend_gaussian with the power already computed, alpha's exponential taken by `exp_fn` (the
 /// CUDA float rasterizer passes the hardware's, see rasterize.cu), and nothing blended once
 /// acc.done. Straight-line code: the tests are predicates on what is written, not branches
@@ -40,12 +57,9 @@ CATGS_INLINE T min_visible_power(T opacity) {
 template <typename T, typename ExpFn>
 CATGS_HD void blend_power_unless_done(PixelAccumulator<T>& acc, T power, T opacity, Vec3<T> colour, T min_transmittance,
                                       ExpFn exp_fn) {
-    const T raw_alpha = opacity * exp_fn(power);
-    // Written so that NaN fails both tests: far off-screen means can make the quadratic form
-    // inf - inf, and min(0.99, NaN) would otherwise draw a NaN alpha as 0.99. `&` rather than
-    // `&&`: every operand is a comparison already made, nothing to short-circuit.
-    const bool draws = !acc.done & (power <= T(0)) & (raw_alpha >= static_cast<T>(kMinAlpha));
-    const T alpha = raw_alpha < static_cast<T>(kMaxAlpha) ? raw_alpha : static_cast<T>(kMaxAlpha);
+    const BlendAlpha<T> a = blend_alpha(power, opacity, exp_fn);
+    const bool draws = !acc.done & a.visible;
+    const T alpha = a.alpha;
     const T next = acc.transmittance * (T(1) - alpha);
     // graphdeco's exclusive stop: the Gaussian that would bring T below the threshold is not
     // drawn, and the pixel is done.
@@ -79,7 +93,7 @@ struct SignedPixel {
     CATGS_HD PixelAccumulator<T> accumulator() const {
         PixelAccumulator<T> acc;
         acc.colour = colour;
-        acc.transmittance = done() ? -signed_transmittance : signed_transmittance;
+        acc.transmittance = fabs_of(signed_transmittance);
         acc.done = done();
         return acc;
     }
@@ -93,9 +107,9 @@ struct SignedPixel {
 template <typename T, typename ExpFn>
 CATGS_HD void blend_power_signed(SignedPixel<T>& px, T power, T opacity, Vec3<T> colour, T min_transmittance,
                                  ExpFn exp_fn) {
-    const T raw_alpha = opacity * exp_fn(power);
-    const bool visible = (power <= T(0)) & (raw_alpha >= static_cast<T>(kMinAlpha));  // NaN fails both
-    const T alpha = raw_alpha < static_cast<T>(kMaxAlpha) ? raw_alpha : static_cast<T>(kMaxAlpha);
+    const BlendAlpha<T> a = blend_alpha(power, opacity, exp_fn);
+    const bool visible = a.visible;
+    const T alpha = a.alpha;
     const T t = px.signed_transmittance;
     const T next = t * (T(1) - alpha);
     const bool stops = visible & (next < min_transmittance);
