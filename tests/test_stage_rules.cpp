@@ -40,6 +40,16 @@ TEST(SortKeyTileBits, HoldEveryTileAndTheParkedOneAtPowerOfTwoBoundaries) {
     static_assert(sort_key_tile_bits(1920 / 16 * 68) == 13);  // 1080p: 8160 tiles
 }
 
+TEST(SortKeyTileBits, NarrowTileKeysHoldEveryIdOfTheGridAndTheParkedOne) {
+    // The GPU's 16-bit tile ids (tile_key.cuh) must hold every real id and the parked one.
+    for (std::uint64_t tiles : {1ull, 8160ull, 32400ull, 65534ull, 65535ull}) {
+        EXPECT_TRUE(narrow_tile_keys(tiles)) << tiles;
+        EXPECT_LE(parked_tile(static_cast<std::uint32_t>(tiles)), 0xffffu) << tiles;
+    }
+    for (std::uint64_t tiles : {65536ull, 65537ull, 1048576ull}) EXPECT_FALSE(narrow_tile_keys(tiles)) << tiles;
+    static_assert(narrow_tile_keys(3840 / 16 * (2160 / 16)));  // 4K: 32400 tiles
+}
+
 TEST(SortKeyTileBits, ParkedKeysSortLastWithinTheSortedBits) {
     for (std::uint32_t tiles : {1u, 2u, 3u, 255u, 256u, 257u, 8160u, 65535u, 65536u}) {
         const int bits = kSortKeyDepthBits + sort_key_tile_bits(tiles);

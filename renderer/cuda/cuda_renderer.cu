@@ -206,6 +206,7 @@ Frame<T> CudaRenderer<T>::Impl::plan_frame(const Camera& camera, const RenderOpt
     f.tiles = static_cast<std::uint64_t>(f.view.tiles_x) * f.view.tiles_y;
     f.pixels = static_cast<std::size_t>(f.view.width) * f.view.height;
     f.tile_bits = sort_key_tile_bits(f.tiles);
+    f.tile_width = tile_key_width(f.tiles);
     f.shared_list = options.culling == Culling::exact;
     f.splitting = (catgs.split_auto || catgs.split_k > 0) && f.plan.split;
     f.speculative = f.cache == CacheMode::speculative;
@@ -353,9 +354,10 @@ void CudaRenderer<T>::Impl::keys(const Frame<T>& f, TileRows rows, std::uint64_t
     const cudaStream_t s = stream;
     PairBuffers& p = buffers.pairs;
     p.current = 0;
+    p.width = f.tile_width;
     if (pairs > 0) {
         for (int k = 0; k < 2; ++k) {
-            p.tiles[k].reserve(pairs, s);
+            p.tiles[k].reserve(pairs, p.width, s);
             p.values[k].reserve(pairs, s);
         }
         GaussianBuffers<T>& g = buffers.gaussians;
@@ -369,12 +371,12 @@ void CudaRenderer<T>::Impl::keys(const Frame<T>& f, TileRows rows, std::uint64_t
                                f.options->culling, f.guard, g.projected.data(), g.touched.data(),
                                buffers.depth.ranked_offsets.data(), buffers.depth.order(), buffers.depth.ranked,
                                keep ? g.emission_offset.data() : nullptr, rows, banded, f.reproject_actual, pairs,
-                               p.tiles[0].data(), p.values[0].data()},
+                               p.tiles[0].keys(p.width), p.values[0].data()},
                    s);
         if (keep) {
-            p.emitted_tiles.reserve(pairs, s);
-            CATGS_CUDA_CHECK(cudaMemcpyAsync(p.emitted_tiles.data(), p.tiles[0].data(), pairs * sizeof(std::uint32_t),
-                                             cudaMemcpyDeviceToDevice, s));
+            p.emitted_tiles.reserve(pairs, p.width, s);
+            CATGS_CUDA_CHECK(cudaMemcpyAsync(p.emitted_tiles.keys(p.width).data, p.tiles[0].keys(p.width).data,
+                                             pairs * tile_key_bytes(p.width), cudaMemcpyDeviceToDevice, s));
         }
     }
     events.record(Event::keys, s);
@@ -410,10 +412,11 @@ void CudaRenderer<T>::Impl::rekey(const Frame<T>& f) {
     order_by_depth(g.sort_depth.data(), false);
     if (f.total > 0) {
         p.current = 0;
-        cuda::rekey(RekeyArgs<T>{key_space, g.touched.data(), buffers.depth.order(), buffers.depth.ranked,
-                                 buffers.depth.ranked_offsets.data(), g.emission_offset.data(), p.emitted_tiles.data(),
-                                 g.projected.data(), f.view, f.options->culling, p.tiles[0].data(), p.values[0].data()},
-                    stream);
+        cuda::rekey(
+            RekeyArgs<T>{key_space, g.touched.data(), buffers.depth.order(), buffers.depth.ranked,
+                         buffers.depth.ranked_offsets.data(), g.emission_offset.data(), p.emitted_tiles.keys(p.width),
+                         g.projected.data(), f.view, f.options->culling, p.tiles[0].keys(p.width), p.values[0].data()},
+            stream);
     }
     events.record(Event::keys, stream);
 }
@@ -443,10 +446,10 @@ bool CudaRenderer<T>::Impl::ranges_and_split(const Frame<T>& f, std::uint64_t pa
     const cudaStream_t s = stream;
     const CatgsOptions& catgs = f.options->catgs;
     TileBuffers& t = buffers.tiles;
-    cuda::ranges(RangesArgs{pairs, buffers.pairs.tiles[buffers.pairs.current].data(),
-                            static_cast<std::uint32_t>(f.tiles), f.shared_list, catgs.split_auto ? 0 : catgs.split_k,
-                            t.range_begin.data(), t.range_end.data(), task_counters()},
-                 s);
+    cuda::ranges(
+        RangesArgs{pairs, buffers.pairs.sorted_tiles(), static_cast<std::uint32_t>(f.tiles), f.shared_list,
+                   catgs.split_auto ? 0 : catgs.split_k, t.range_begin.data(), t.range_end.data(), task_counters()},
+        s);
     events.record(Event::ranges, s);
     // Exact culling shares one list, which this task layout does not split.
     const bool split = f.splitting && !f.shared_list && pairs > 0;

@@ -87,6 +87,7 @@ template <typename T>
 struct StageReadback {
     std::vector<std::uint64_t> sorted_keys;    ///< sort: the frame's pairs, by key
     std::vector<std::uint32_t> sorted_values;  ///< sort: the Gaussian of each key
+    int tile_key_bytes = 0;                    ///< keys, sort, ranges: bytes of a pair's tile id on the device
     /// ranges: [begin, end) per tile; exact culling has one list, [0, pairs) for every tile.
     std::vector<TileRange> tile_ranges;
     /// split: every tile, then the extra sub-tasks by (tile, index). The device appends them in

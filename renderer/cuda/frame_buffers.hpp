@@ -17,6 +17,7 @@
 #include "cuda_check.hpp"
 #include "device_buffer.hpp"
 #include "kernel_common.cuh"
+#include "tile_key.cuh"
 
 namespace catgs::cuda {
 
@@ -83,17 +84,34 @@ struct DepthOrderBuffers {
     }
 };
 
+/// Pair tile ids as narrow as the grid allows (tile_key.cuh): a typed view of raw device bytes,
+/// so one arena serves either width.
+class TileKeyArray {
+public:
+    bool reserve(std::size_t count, TileKeyWidth width, cudaStream_t stream) {
+        return bytes_.reserve(count * tile_key_bytes(width), stream);
+    }
+    TileKeys keys(TileKeyWidth width) const { return TileKeys{bytes_.data(), width}; }
+    std::size_t bytes() const { return bytes_.capacity(); }
+
+private:
+    DeviceBytes bytes_;
+};
+
 /// Per tile-Gaussian pair: its tile (the sort key: the pairs are emitted front to back, so
 /// the tile alone orders them, sort.cuh) and Gaussian, double-buffered for the sort, and a key
 /// frame's tiles in emission order, which cached frames that re-sort re-key from (their values
-/// follow from GaussianBuffers::emission_offset).
+/// follow from GaussianBuffers::emission_offset). `width` is the frame's tile key width, which
+/// a window's frames share (they have the key frame's resolution).
 struct PairBuffers {
-    DeviceArray<std::uint32_t> tiles[2];
+    TileKeyArray tiles[2];
     DeviceArray<std::uint32_t> values[2];
     int current = 0;  // which of tiles/values holds the sorted pairs
-    DeviceArray<std::uint32_t> emitted_tiles;
+    TileKeyWidth width = TileKeyWidth::bits32;
+    TileKeyArray emitted_tiles;
     DeviceArray<std::uint8_t> sort_temp;  // CUB's DeviceRadixSort
 
+    TileKeys sorted_tiles() const { return tiles[current].keys(width); }
     std::size_t bytes() const {
         return tiles[0].bytes() + tiles[1].bytes() + values[0].bytes() + values[1].bytes() + emitted_tiles.bytes() +
                sort_temp.bytes();

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 
+#include "catgs/error.hpp"
 #include "catgs/stages/keys.hpp"
 #include "cuda_check.hpp"
 
@@ -13,12 +14,12 @@ namespace {
 // order within each tile (sort.cuh). `capacity` bounds every write. Bounded at 2 blocks an SM
 // (128 registers): with the bare thread bound, ptxas held the window instance to 64 registers
 // and spilled, which the build rejects; at 2 both instances take 80, without spilling.
-template <typename T, int MaxWindow>
+template <typename T, int MaxWindow, typename Key>
 __global__ void __launch_bounds__(kThreads, 2)
     keys_kernel(DeviceSceneView scene, ChunkSpace space, const View<T>* views, int window, Culling culling, T guard,
                 const Projected<T>* projected, const std::uint64_t* touched, const std::uint64_t* offsets,
                 const std::uint32_t* order, std::uint64_t ordered, std::uint64_t* emission_offset, TileRows rows,
-                bool band, bool reprojected, std::uint64_t capacity, std::uint32_t* keys, std::uint32_t* values) {
+                bool band, bool reprojected, std::uint64_t capacity, Key* keys, std::uint32_t* values) {
     const std::uint64_t k = static_cast<std::uint64_t>(blockIdx.x) * blockDim.x + threadIdx.x;
     if (k >= ordered) return;
     const std::uint64_t p = order[k];
@@ -29,7 +30,7 @@ __global__ void __launch_bounds__(kThreads, 2)
     const std::uint64_t end = min(slot + touched[p], capacity);
     auto emit = [&](std::uint32_t tile) {
         if (slot < end) {
-            keys[slot] = tile;
+            keys[slot] = static_cast<Key>(tile);
             values[slot] = static_cast<std::uint32_t>(i);
         }
         ++slot;
@@ -57,11 +58,11 @@ __global__ void rekey_depth_kernel(ChunkSpace space, const std::uint64_t* touche
 // the grid (sorts last, no range covers it). Thread k moves the
 // pairs of the k-th nearest cached slot, so the tile sort leaves each list front to back with
 // equal depths in slot order, as a full render does.
-template <typename T>
+template <typename T, typename Key>
 __global__ void rekey_kernel(ChunkSpace space, const std::uint64_t* touched, const std::uint32_t* order,
                              std::uint64_t ordered, const std::uint64_t* offsets, const std::uint64_t* emission_offset,
-                             const std::uint32_t* emitted_tiles, const Projected<T>* projected, View<T> view,
-                             Culling culling, std::uint32_t* keys, std::uint32_t* values) {
+                             const Key* emitted_tiles, const Projected<T>* projected, View<T> view, Culling culling,
+                             Key* keys, std::uint32_t* values) {
     const std::uint64_t k = static_cast<std::uint64_t>(blockIdx.x) * blockDim.x + threadIdx.x;
     if (k >= ordered) return;
     const std::uint64_t slot = order[k];
@@ -75,7 +76,7 @@ __global__ void rekey_kernel(ChunkSpace space, const std::uint64_t* touched, con
         const std::uint32_t tile = emitted_tiles[from + j];
         // Exact culling shares one list among all tiles: nothing to filter.
         const bool keep = culling == Culling::exact || (p.opacity > T(0) && touches_tile(p, culling, view, tile));
-        keys[to + j] = keep ? tile : parked_tile(tiles);
+        keys[to + j] = static_cast<Key>(keep ? tile : parked_tile(tiles));
         values[to + j] = static_cast<std::uint32_t>(i);
     }
 }
@@ -98,17 +99,21 @@ __global__ void count_band_kernel(ChunkSpace space, const Projected<T>* projecte
 template <typename T>
 void keys(const KeysArgs<T>& a, cudaStream_t s) {
     if (a.ordered == 0) return;
-    const auto launch = [&](auto kernel) {
-        kernel<<<blocks_for(a.ordered, kThreads), kThreads, 0, s>>>(
-            a.scene, a.space, a.views, a.window, a.culling, a.guard, a.projected, a.touched, a.offsets, a.order,
-            a.ordered, a.emission_offset, a.rows, a.band, a.reprojected, a.capacity, a.keys, a.values);
-    };
-    if (a.window == 1)
-        launch(keys_kernel<T, 1>);
-    else if (a.window <= kUnrolledWindow)
-        launch(keys_kernel<T, kSmallWindow<T>>);
-    else
-        launch(keys_kernel<T, kMaxWindow>);
+    with_tile_key(a.keys.width, [&](auto key) {
+        using Key = decltype(key);
+        const auto launch = [&](auto kernel) {
+            kernel<<<blocks_for(a.ordered, kThreads), kThreads, 0, s>>>(
+                a.scene, a.space, a.views, a.window, a.culling, a.guard, a.projected, a.touched, a.offsets, a.order,
+                a.ordered, a.emission_offset, a.rows, a.band, a.reprojected, a.capacity, key_data<Key>(a.keys),
+                a.values);
+        };
+        if (a.window == 1)
+            launch(keys_kernel<T, 1, Key>);
+        else if (a.window <= kUnrolledWindow)
+            launch(keys_kernel<T, kSmallWindow<T>, Key>);
+        else
+            launch(keys_kernel<T, kMaxWindow, Key>);
+    });
     CATGS_CUDA_CHECK_LAUNCH("keys_kernel");
 }
 
@@ -123,9 +128,13 @@ void rekey_depth(const RekeyDepthArgs<T>& a, cudaStream_t s) {
 template <typename T>
 void rekey(const RekeyArgs<T>& a, cudaStream_t s) {
     if (a.ordered == 0) return;
-    rekey_kernel<T><<<blocks_for(a.ordered, kThreads), kThreads, 0, s>>>(
-        a.space, a.touched, a.order, a.ordered, a.offsets, a.emission_offset, a.emitted_tiles, a.projected, a.view,
-        a.culling, a.keys, a.values);
+    if (a.keys.width != a.emitted_tiles.width) throw Error("cuda renderer: rekey between tile key widths");
+    with_tile_key(a.keys.width, [&](auto key) {
+        using Key = decltype(key);
+        rekey_kernel<T, Key><<<blocks_for(a.ordered, kThreads), kThreads, 0, s>>>(
+            a.space, a.touched, a.order, a.ordered, a.offsets, a.emission_offset, key_data<const Key>(a.emitted_tiles),
+            a.projected, a.view, a.culling, key_data<Key>(a.keys), a.values);
+    });
     CATGS_CUDA_CHECK_LAUNCH("rekey_kernel");
 }
 

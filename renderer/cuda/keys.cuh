@@ -15,6 +15,7 @@
 #include "catgs/stages/tiles.hpp"
 #include "catgs/stages/view.hpp"
 #include "kernel_common.cuh"
+#include "tile_key.cuh"
 
 namespace catgs::cuda {
 
@@ -39,7 +40,7 @@ struct KeysArgs {
     bool band;               // banded: one pose, whose geometry preprocess stored
     bool reprojected;        // the window lowered the near plane (PreprocessArgs::reproject_actual)
     std::uint64_t capacity;  // bounds every write
-    std::uint32_t* keys;     // tile ids
+    TileKeys keys;           // tile ids
     std::uint32_t* values;
 };
 
@@ -66,11 +67,11 @@ struct RekeyArgs {
     std::uint64_t ordered;                 // how many (those with pairs)
     const std::uint64_t* offsets;          // by rank: where each slot's pairs go
     const std::uint64_t* emission_offset;  // by slot: where they are among the emitted pairs
-    const std::uint32_t* emitted_tiles;    // the key frame's pairs' tiles in emission order
+    TileKeys emitted_tiles;                // the key frame's pairs' tiles in emission order
     const Projected<T>* projected;         // at the current pose (reproject)
     View<T> view;
     Culling culling;
-    std::uint32_t* keys;  // tile ids (parked_tile when the current pose leaves the tile)
+    TileKeys keys;  // tile ids (parked_tile when the current pose leaves the tile), of emitted_tiles' width
     std::uint32_t* values;
 };
 

@@ -9,8 +9,9 @@ namespace {
 
 // Tile ranges; ids beyond the grid are ignored rather than written (defence against
 // a corrupted key, the failure mode of gaussian-splatting#781).
-__global__ void ranges_kernel(std::uint64_t n, const std::uint32_t* keys, std::uint32_t tiles,
-                              std::uint64_t* range_begin, std::uint64_t* range_end, TaskCounters* counters) {
+template <typename Key>
+__global__ void ranges_kernel(std::uint64_t n, const Key* keys, std::uint32_t tiles, std::uint64_t* range_begin,
+                              std::uint64_t* range_end, TaskCounters* counters) {
     const std::uint64_t i = static_cast<std::uint64_t>(blockIdx.x) * blockDim.x + threadIdx.x;
     bool first = false, inside = false;
     if (i < n) {
@@ -42,8 +43,11 @@ void ranges(const RangesArgs& a, cudaStream_t s) {
     CATGS_CUDA_CHECK(
         cudaMemcpyAsync(a.counters, &fresh, offsetof(TaskCounters, longest_list), cudaMemcpyHostToDevice, s));
     if (a.pairs == 0 || a.shared_list) return;
-    ranges_kernel<<<blocks_for(a.pairs, kThreads), kThreads, 0, s>>>(a.pairs, a.keys, a.tiles, a.range_begin,
-                                                                     a.range_end, a.counters);
+    with_tile_key(a.keys.width, [&](auto key) {
+        using Key = decltype(key);
+        ranges_kernel<<<blocks_for(a.pairs, kThreads), kThreads, 0, s>>>(a.pairs, key_data<const Key>(a.keys), a.tiles,
+                                                                         a.range_begin, a.range_end, a.counters);
+    });
     CATGS_CUDA_CHECK_LAUNCH("ranges_kernel");
 }
 

@@ -7,12 +7,13 @@
 #include <cstdint>
 
 #include "kernel_common.cuh"
+#include "tile_key.cuh"
 
 namespace catgs::cuda {
 
 struct RangesArgs {
     std::uint64_t pairs;
-    const std::uint32_t* keys;  // the sorted pairs' tiles
+    TileKeys keys;  // the sorted pairs' tiles
     std::uint32_t tiles;
     bool shared_list;             // exact culling: one list for every tile, no ranges
     std::uint32_t fixed_split_k;  // the task list's k unless split derives it (0)

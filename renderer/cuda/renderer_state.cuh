@@ -34,6 +34,7 @@ struct Frame {
     std::uint64_t tiles = 0;
     std::size_t pixels = 0;
     int tile_bits = 0;
+    TileKeyWidth tile_width = TileKeyWidth::bits32;
     bool shared_list = false;  // exact culling: one list serves every tile
     bool splitting = false;
     bool speculative = false;

@@ -60,15 +60,19 @@ void select_slots_with_pairs(const DepthOrderArgs& a, cudaStream_t s) {
 void sort(const SortArgs& a, cudaStream_t s) {
     if (a.count <= 1) return;
     PairBuffers& p = *a.pairs;
-    cub::DoubleBuffer<std::uint32_t> kb(p.tiles[p.current].data(), p.tiles[1 - p.current].data());
-    cub::DoubleBuffer<std::uint32_t> vb(p.values[p.current].data(), p.values[1 - p.current].data());
-    std::size_t temp_bytes = 0;
-    CATGS_CUDA_CHECK(cub::DeviceRadixSort::SortPairs(nullptr, temp_bytes, kb, vb, static_cast<std::int64_t>(a.count), 0,
-                                                     a.tile_bits, s));
-    p.sort_temp.reserve(temp_bytes, s);
-    CATGS_CUDA_CHECK(cub::DeviceRadixSort::SortPairs(p.sort_temp.data(), temp_bytes, kb, vb,
-                                                     static_cast<std::int64_t>(a.count), 0, a.tile_bits, s));
-    p.current = kb.selector == 0 ? p.current : 1 - p.current;
+    with_tile_key(p.width, [&](auto key) {
+        using Key = decltype(key);
+        cub::DoubleBuffer<Key> kb(key_data<Key>(p.tiles[p.current].keys(p.width)),
+                                  key_data<Key>(p.tiles[1 - p.current].keys(p.width)));
+        cub::DoubleBuffer<std::uint32_t> vb(p.values[p.current].data(), p.values[1 - p.current].data());
+        std::size_t temp_bytes = 0;
+        CATGS_CUDA_CHECK(cub::DeviceRadixSort::SortPairs(nullptr, temp_bytes, kb, vb,
+                                                         static_cast<std::int64_t>(a.count), 0, a.tile_bits, s));
+        p.sort_temp.reserve(temp_bytes, s);
+        CATGS_CUDA_CHECK(cub::DeviceRadixSort::SortPairs(p.sort_temp.data(), temp_bytes, kb, vb,
+                                                         static_cast<std::int64_t>(a.count), 0, a.tile_bits, s));
+        p.current = kb.selector == 0 ? p.current : 1 - p.current;
+    });
 }
 
 std::uint64_t depth_order(const DepthOrderArgs& a, cudaStream_t s) {

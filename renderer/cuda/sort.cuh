@@ -2,10 +2,11 @@
 //
 // The Gaussians are put in depth order first (depth_order: 32-bit keys of the slots that have
 // pairs, not of every slot nor of the pairs), and keys then emits each Gaussian's pairs in that
-// order (banded frames too, band by band). A stable radix sort of the pairs' 32-bit tile ids
-// then leaves every tile's pairs front to back, ties in Gaussian (slot) order: the order the
-// CPU backend's sort of (tile | depth) keys gives (catgs/stages/keys.hpp), with 2 passes over
-// 8 bytes a pair instead of 6 over 12 (32 depth bits + 13..15 tile bits, 8 bits a pass).
+// order (banded frames too, band by band). A stable radix sort of the pairs' tile ids then
+// leaves every tile's pairs front to back, ties in Gaussian (slot) order: the order the CPU
+// backend's sort of (tile | depth) keys gives (catgs/stages/keys.hpp), with 2 passes over 6
+// bytes a pair (16-bit tile ids up to 65535 tiles, tile_key.cuh; else 8) instead of 6 over 12
+// (32 depth bits + 13..15 tile bits, 8 bits a pass).
 #pragma once
 
 #include <cuda_runtime_api.h>
@@ -17,7 +18,7 @@
 namespace catgs::cuda {
 
 struct SortArgs {
-    PairBuffers* pairs;  // sorts tiles/values[current]; current then names the sorted pair
+    PairBuffers* pairs;  // sorts tiles/values[current] (tile ids of pairs->width); current then names the sorted pair
     std::uint64_t count;
     int tile_bits;  // sort_key_tile_bits of the grid: the parked tile included
 };

@@ -47,7 +47,14 @@ StageReadback<T> CudaRenderer<T>::read_back_stages() {
     const PairBuffers& p = m.buffers.pairs;
     const TileBuffers& t = m.buffers.tiles;
     StageReadback<T> r;
-    const std::vector<std::uint32_t> tiles = copy_to_host(p.tiles[p.current].data(), last.pairs, s);
+    std::vector<std::uint32_t> tiles;
+    r.tile_key_bytes = static_cast<int>(tile_key_bytes(p.width));
+    with_tile_key(p.width, [&](auto key) {
+        using Key = decltype(key);
+        const std::vector<Key> narrow = copy_to_host(key_data<Key>(p.sorted_tiles()), last.pairs, s);
+        CATGS_CUDA_CHECK(cudaStreamSynchronize(s));
+        tiles.assign(narrow.begin(), narrow.end());
+    });
     r.sorted_values = copy_to_host(p.values[p.current].data(), last.pairs, s);
     const std::uint64_t gaussians = m.scene->count();
     DeviceArray<float> depth_of;

@@ -258,6 +258,54 @@ TEST_F(CudaStagesTest, DoubleStagesEqualTheCpuStagesOnLargeFootprints) {
     }
 }
 
+// The pairs' tile ids are 16 bits wide up to 65535 tiles (whose parked id is 0xffff) and 32
+// bits from 65536 on (tile_key.cuh): at both sides of that edge, a plain frame, a split one and
+// a cached run that re-keys and parks pairs must give the CPU's stages. 4080x4112 is 255 x 257 =
+// 65535 tiles; 4096x4096 is 65536. The scene is sparse, so that the CPU's double reference of
+// 17M pixels stays quick.
+TEST_F(CudaStagesTest, DoubleStagesEqualTheCpuStagesAtTheTileKeyWidthEdge) {
+    test::RandomSceneParams p;
+    p.count = 3000;
+    p.extent = 2.5;
+    const Scene host = test::random_scene(test::fresh_seed("cuda stages tile key width"), p);
+    const auto device = std::make_shared<cuda::DeviceScene>(host);
+    struct Grid {
+        int width, height, key_bytes;
+    };
+    for (const Grid grid : {Grid{4080, 4112, 2}, Grid{4096, 4096, 4}}) {
+        const std::string size = std::to_string(grid.width) + "x" + std::to_string(grid.height);
+        for (int split_k : {0, 8}) {
+            RenderOptions options;
+            options.catgs.split_k = static_cast<std::uint32_t>(split_k);
+            const Camera camera = test::forward_camera(grid.width, grid.height, 75.0);
+            Both<double> both;
+            both.gpu.set_scene(device);
+            both.render(host, camera, options);
+            const std::string what = "tile key width " + size + " split " + std::to_string(split_k);
+            EXPECT_EQ(both.stages.tile_key_bytes, grid.key_bytes) << what;
+            expect_identical_stages(both.cpu, both.stages, make_view<double>(camera, host.origin), what);
+        }
+        RenderOptions cached;
+        cached.catgs.cache = CacheMode::speculative;
+        cached.catgs.resort_cached = true;  // re-key every cached frame: the parked ids
+        Both<double> both;
+        both.gpu.set_scene(device);
+        int resorted = 0;
+        for (int frame = 0; frame < 4; ++frame) {
+            const Camera camera =
+                test::forward_camera(grid.width, grid.height, 75.0, {0.002 * frame, 0.0, 0.004 * frame});
+            both.render(host, camera, cached);
+            if (both.gpu_stats.key_frame != both.cpu_stats.key_frame || both.gpu_stats.window != both.cpu_stats.window)
+                break;
+            const std::string what = "tile key width " + size + " cached frame " + std::to_string(frame);
+            EXPECT_EQ(both.stages.tile_key_bytes, grid.key_bytes) << what;
+            expect_identical_stages(both.cpu, both.stages, make_view<double>(camera, host.origin), what);
+            resorted += !both.gpu_stats.key_frame && !both.gpu_stats.order_reused;
+        }
+        EXPECT_GE(resorted, 1) << size << ": no cached frame re-keyed its pairs";
+    }
+}
+
 // The speculative cache: key frames with a window of poses (union footprints), and cached
 // frames that re-key, park and re-sort the key frame's pairs. The run stops at the first frame
 // the two planners plan differently (their key-frame summaries are reduced in different

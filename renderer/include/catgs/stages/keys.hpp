@@ -47,6 +47,15 @@ CATGS_HD constexpr int sort_key_tile_bits(std::uint64_t tiles) {
     return bits;
 }
 
+/// The GPU's pairs carry their tile id alone (sort.cuh), in 16 bits while every id, the parked
+/// one included, fits there: grids of up to 65535 tiles (4K is 32400), which halves the bytes
+/// the tile sort moves a key. Larger grids take 32 bits.
+inline constexpr int kNarrowTileKeyBits = 16;
+
+CATGS_HD constexpr bool narrow_tile_keys(std::uint64_t tiles) {
+    return sort_key_tile_bits(tiles) <= kNarrowTileKeyBits;
+}
+
 /// The first pose set in `valid` (not 0): the pose whose depth orders a Gaussian's keys.
 CATGS_INLINE int first_valid_pose(std::uint32_t valid) {
     int k = 0;
