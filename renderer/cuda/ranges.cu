@@ -1,5 +1,7 @@
 #include "ranges.cuh"
 
+#include <cub/block/block_reduce.cuh>
+
 #include "cuda_check.hpp"
 
 #include <cstddef>
@@ -7,27 +9,42 @@
 namespace catgs::cuda {
 namespace {
 
+// Pairs a thread of ranges takes. One a thread made a block of 256 pairs, and every block adds
+// its two counts to the same two words: at 4K (26M pairs) about 200k atomics on two addresses,
+// which the L2 serialises (ranges took 0.113 ms at city_ring 4K). 16 a thread cut them
+// sixteenfold: 0.069 ms (H200, session 18).
+constexpr int kRangesItems = 16;
+constexpr int kRangesPairsPerBlock = kThreads * kRangesItems;
+
 // Tile ranges; ids beyond the grid are ignored rather than written (defence against
-// a corrupted key, the failure mode of gaussian-splatting#781).
+// a corrupted key, the failure mode of gaussian-splatting#781). A block's pairs are
+// consecutive, taken a block-wide stride at a time so that each load is coalesced.
 template <typename Key>
 __global__ void ranges_kernel(std::uint64_t n, const Key* keys, std::uint32_t tiles, std::uint64_t* range_begin,
                               std::uint64_t* range_end, TaskCounters* counters) {
-    const std::uint64_t i = static_cast<std::uint64_t>(blockIdx.x) * blockDim.x + threadIdx.x;
-    bool first = false, inside = false;
-    if (i < n) {
+    const std::uint64_t first_pair = static_cast<std::uint64_t>(blockIdx.x) * kRangesPairsPerBlock;
+    unsigned firsts = 0, insides = 0;
+#pragma unroll
+    for (int j = 0; j < kRangesItems; ++j) {
+        const std::uint64_t i = first_pair + static_cast<std::uint64_t>(j) * kThreads + threadIdx.x;
+        if (i >= n) break;
         const std::uint32_t tile = keys[i];
-        inside = tile < tiles;
-        if (inside) {
-            first = i == 0 || keys[i - 1] != tile;
-            if (first) range_begin[tile] = i;
-            if (i + 1 == n || keys[i + 1] != tile) range_end[tile] = i + 1;
+        if (tile >= tiles) continue;
+        ++insides;
+        if (i == 0 || keys[i - 1] != tile) {
+            range_begin[tile] = i;
+            ++firsts;
         }
+        if (i + 1 == n || keys[i + 1] != tile) range_end[tile] = i + 1;
     }
-    const int block_first = __syncthreads_count(first);
-    const int block_inside = __syncthreads_count(inside);
-    if (threadIdx.x == 0 && block_first > 0) atomicAdd(&counters->nonempty_tiles, static_cast<unsigned>(block_first));
-    if (threadIdx.x == 0 && block_inside > 0)
-        atomicAdd(&counters->rendered_pairs, static_cast<unsigned long long>(block_inside));
+    using Reduce = cub::BlockReduce<unsigned, kThreads>;
+    __shared__ typename Reduce::TempStorage temp;
+    const unsigned block_firsts = Reduce(temp).Sum(firsts);
+    __syncthreads();
+    const unsigned block_insides = Reduce(temp).Sum(insides);
+    if (threadIdx.x == 0 && block_firsts > 0) atomicAdd(&counters->nonempty_tiles, block_firsts);
+    if (threadIdx.x == 0 && block_insides > 0)
+        atomicAdd(&counters->rendered_pairs, static_cast<unsigned long long>(block_insides));
 }
 
 }  // namespace
@@ -45,8 +62,8 @@ void ranges(const RangesArgs& a, cudaStream_t s) {
     if (a.pairs == 0 || a.shared_list) return;
     with_tile_key(a.keys.width, [&](auto key) {
         using Key = decltype(key);
-        ranges_kernel<<<blocks_for(a.pairs, kThreads), kThreads, 0, s>>>(a.pairs, key_data<const Key>(a.keys), a.tiles,
-                                                                         a.range_begin, a.range_end, a.counters);
+        ranges_kernel<<<blocks_for(a.pairs, kRangesPairsPerBlock), kThreads, 0, s>>>(
+            a.pairs, key_data<const Key>(a.keys), a.tiles, a.range_begin, a.range_end, a.counters);
     });
     CATGS_CUDA_CHECK_LAUNCH("ranges_kernel");
 }
