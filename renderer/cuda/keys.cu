@@ -9,13 +9,27 @@
 namespace catgs::cuda {
 namespace {
 
+// Keys' launch shape. Blocks of 256 at 2 an SM (128 registers): with the bare thread bound,
+// ptxas held the window instance to 64 registers and spilled, which the build rejects; at 2
+// the window instances take 80, without spilling. The single-frame float instance (66
+// registers, every plain frame) runs in blocks of 128 at 7 an SM: 28 warps resident where 3
+// blocks of 256 held 24, and a block waits on fewer long footprints. keys fell 4-13% on the
+// kit's six paths (city_ring 4K 0.668 -> 0.641 ms, garden survey 1080p 0.387 -> 0.339; H200,
+// session 18, plain, 300 frames).
+template <typename T, int MaxWindow>
+struct KeysShape {
+    static constexpr int kThreads = 256, kMinBlocks = 2;
+};
+template <>
+struct KeysShape<float, 1> {
+    static constexpr int kThreads = 128, kMinBlocks = 7;
+};
+
 // Keys (tile ids) at each Gaussian's offset: thread k emits the k-th nearest slot, so the pairs
 // come out front to back, equal depths in slot order, and the stable sort by tile keeps that
-// order within each tile (sort.cuh). `capacity` bounds every write. Bounded at 2 blocks an SM
-// (128 registers): with the bare thread bound, ptxas held the window instance to 64 registers
-// and spilled, which the build rejects; at 2 both instances take 80, without spilling.
+// order within each tile (sort.cuh). `capacity` bounds every write.
 template <typename T, int MaxWindow, typename Key>
-__global__ void __launch_bounds__(kThreads, 2)
+__global__ void __launch_bounds__(KeysShape<T, MaxWindow>::kThreads, KeysShape<T, MaxWindow>::kMinBlocks)
     keys_kernel(DeviceSceneView scene, ChunkSpace space, const View<T>* views, int window, Culling culling, T guard,
                 const Projected<T>* projected, const std::uint64_t* touched, const std::uint64_t* offsets,
                 const std::uint32_t* order, std::uint64_t ordered, std::uint64_t* emission_offset, TileRows rows,
@@ -101,18 +115,18 @@ void keys(const KeysArgs<T>& a, cudaStream_t s) {
     if (a.ordered == 0) return;
     with_tile_key(a.keys.width, [&](auto key) {
         using Key = decltype(key);
-        const auto launch = [&](auto kernel) {
-            kernel<<<blocks_for(a.ordered, kThreads), kThreads, 0, s>>>(
+        const auto launch = [&](auto kernel, int threads) {
+            kernel<<<blocks_for(a.ordered, threads), threads, 0, s>>>(
                 a.scene, a.space, a.views, a.window, a.culling, a.guard, a.projected, a.touched, a.offsets, a.order,
                 a.ordered, a.emission_offset, a.rows, a.band, a.reprojected, a.capacity, key_data<Key>(a.keys),
                 a.values);
         };
         if (a.window == 1)
-            launch(keys_kernel<T, 1, Key>);
+            launch(keys_kernel<T, 1, Key>, KeysShape<T, 1>::kThreads);
         else if (a.window <= kUnrolledWindow)
-            launch(keys_kernel<T, kSmallWindow<T>, Key>);
+            launch(keys_kernel<T, kSmallWindow<T>, Key>, KeysShape<T, kSmallWindow<T>>::kThreads);
         else
-            launch(keys_kernel<T, kMaxWindow, Key>);
+            launch(keys_kernel<T, kMaxWindow, Key>, KeysShape<T, kMaxWindow>::kThreads);
     });
     CATGS_CUDA_CHECK_LAUNCH("keys_kernel");
 }

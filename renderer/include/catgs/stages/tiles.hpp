@@ -124,10 +124,14 @@ struct TileSpan {
 template <typename T>
 struct EllipseRows {
     double mean_x, mean_y, a, b, level, det, half_y, peak_dy;
+    /// 1 / a: a row's two ends divide by a, and a double division is a long instruction sequence
+    /// on the GPU, which keys and preprocess's count repeat for every tile row of every footprint.
+    double inverse_a;
     bool usable;  // false: a conic that is not positive definite (the tile test decides)
 
     /// Unusable until assigned: what a window's array holds for a pose without a footprint.
-    CATGS_HD EllipseRows() : mean_x(0), mean_y(0), a(0), b(0), level(0), det(0), half_y(0), peak_dy(0), usable(false) {}
+    CATGS_HD EllipseRows()
+        : mean_x(0), mean_y(0), a(0), b(0), level(0), det(0), half_y(0), peak_dy(0), inverse_a(0), usable(false) {}
     CATGS_HD EllipseRows(const Projected<T>& g, T level_t)
         : mean_x(static_cast<double>(g.mean.x)),
           mean_y(static_cast<double>(g.mean.y)),
@@ -136,7 +140,8 @@ struct EllipseRows {
           level(static_cast<double>(level_t)),
           det(0),
           half_y(0),
-          peak_dy(0) {
+          peak_dy(0),
+          inverse_a(0) {
         const double c = static_cast<double>(g.conic.z);
         det = a * c - b * b;
         usable = a > 0 && c > 0 && det > 0 && level > 0 && is_finite(a * c) && is_finite(level) && is_finite(mean_x) &&
@@ -144,7 +149,8 @@ struct EllipseRows {
         if (!usable) return;
         half_y = sqrt_of(level * a / det);         // the ellipse's y half-extent
         peak_dy = b * sqrt_of(level / (det * c));  // the leftmost point's dy; the rightmost's is -peak_dy
-        usable = is_finite(half_y) && is_finite(peak_dy);
+        inverse_a = 1.0 / a;
+        usable = is_finite(half_y) && is_finite(peak_dy) && is_finite(inverse_a);
     }
 
     /// The tiles of row ty within `rect` whose pixel-centre rectangle, grown by `guard`,
@@ -158,8 +164,8 @@ struct EllipseRows {
         if (!(y0 <= y1)) return {rect.x0, rect.x0};
         const double right_dy = -peak_dy < y0 ? y0 : (-peak_dy > y1 ? y1 : -peak_dy);
         const double left_dy = peak_dy < y0 ? y0 : (peak_dy > y1 ? y1 : peak_dy);
-        const double right = mean_x + (-b * right_dy + root(right_dy)) / a + guard;
-        const double left = mean_x + (-b * left_dy - root(left_dy)) / a - guard;
+        const double right = mean_x + (-b * right_dy + root(right_dy)) * inverse_a + guard;
+        const double left = mean_x + (-b * left_dy - root(left_dy)) * inverse_a - guard;
         // Tile tx's pixel-centre columns: [16 tx + 0.5, min(16 tx + 16, width) - 0.5].
         if (!(left <= view.width - 0.5)) return {rect.x0, rect.x0};
         const int first = -clamped_floor(-(left - (kTileSize - 0.5)) / kTileSize, -(1 << 30), 1 << 30);
