@@ -91,12 +91,28 @@ LoadTotals add_up(const std::vector<StreamResult>& results) {
     return t;
 }
 
-nlohmann::json report_json(const Connection& conn, const SessionFlags& f, int streams, double elapsed,
+/// The run's two time bases. `elapsed` is the wall time from before the first connection to the
+/// end of the last stream, each stream's setup and its last frames included; `schedule` is how
+/// long the poses' open-loop schedule lasts. A server that answers every pose delivers streams x
+/// rate frames per second of the schedule, whatever its setup costs; over `elapsed` it cannot.
+struct LoadTimes {
+    double elapsed_s, schedule_s;
+};
+
+/// Frames received per pose sent: 1 when every pose got its frame, less by the poses the server
+/// coalesced (latest wins) or that were still in flight when the run ended.
+double served_fraction(const LoadTotals& t) {
+    return t.poses > 0 ? static_cast<double>(t.frames) / static_cast<double>(t.poses) : 0.0;
+}
+
+nlohmann::json report_json(const Connection& conn, const SessionFlags& f, int streams, LoadTimes times,
                            const LoadTotals& t) {
     const LatencyRecorder& all = t.latency;
+    const double elapsed = times.elapsed_s;
     return {{"server", conn.server},
             {"streams", streams},
             {"duration_s", elapsed},
+            {"schedule_s", times.schedule_s},
             {"rate_hz", f.rate},
             {"width", f.width},
             {"height", f.height},
@@ -105,6 +121,8 @@ nlohmann::json report_json(const Connection& conn, const SessionFlags& f, int st
             {"frames", t.frames},
             {"frames_per_s", t.frames / elapsed},
             {"frames_per_s_per_stream", t.frames / elapsed / streams},
+            {"frames_per_s_of_schedule", t.frames / times.schedule_s},
+            {"poses_served", served_fraction(t)},
             {"megabytes_per_s", t.bytes / elapsed / 1e6},
             {"poses_coalesced", t.coalesced},
             {"frames_coalesced", t.frames_coalesced},
@@ -122,8 +140,9 @@ nlohmann::json report_json(const Connection& conn, const SessionFlags& f, int st
             {"status_codes", t.codes}};
 }
 
-void print_report(const SessionFlags& f, int streams, double elapsed, const LoadTotals& t) {
+void print_report(const SessionFlags& f, int streams, LoadTimes times, const LoadTotals& t) {
     const LatencyRecorder& all = t.latency;
+    const double elapsed = times.elapsed_s;
     std::printf("load: %d streams x %.1f s at %.0f Hz, %dx%d %s\n", streams, elapsed, f.rate, f.width, f.height,
                 f.encoding.c_str());
     std::printf("  %-26s %12llu\n  %-26s %12llu\n  %-26s %12.1f\n  %-26s %12.2f\n  %-26s %12llu\n  %-26s %12llu\n",
@@ -132,6 +151,9 @@ void print_report(const SessionFlags& f, int streams, double elapsed, const Load
                 t.bytes / elapsed / 1e6, "poses coalesced (server)", static_cast<unsigned long long>(t.coalesced),
                 "frame errors", static_cast<unsigned long long>(t.errors));
     std::printf("  %-26s %12d\n", "reconnects", t.reconnects);
+    std::printf("  %-26s %12.1f   (%.1f s of poses; above: over all %.1f s, setup included)\n",
+                "frames/s of the schedule", t.frames / times.schedule_s, times.schedule_s, elapsed);
+    std::printf("  %-26s %12.1f%%\n", "poses served", 100.0 * served_fraction(t));
     std::printf("  latency ms (from intended send time)\n");
     for (const auto& [name, p] : std::vector<std::pair<std::string, double>>{
              {"p50", 0.5}, {"p90", 0.9}, {"p95", 0.95}, {"p99", 0.99}, {"p99.9", 0.999}})
@@ -170,14 +192,15 @@ int run_load_command(const Connection& conn, const LoadArgs& args) {
 
     const Clock::time_point start = Clock::now();
     const std::vector<StreamResult> results = run_streams(conn, plan, args.streams);
-    const double elapsed = std::chrono::duration<double>(Clock::now() - start).count();
+    const LoadTimes times{std::chrono::duration<double>(Clock::now() - start).count(),
+                          static_cast<double>(plan.poses) / f.rate};
 
     const LoadTotals totals = add_up(results);
-    print_report(f, args.streams, elapsed, totals);
+    print_report(f, args.streams, times, totals);
     if (!args.json_out.empty()) {
         std::ofstream file(args.json_out);
         if (!file) throw Error("--json-out '" + args.json_out + "': cannot write");
-        file << report_json(conn, f, args.streams, elapsed, totals).dump(2) << "\n";
+        file << report_json(conn, f, args.streams, times, totals).dump(2) << "\n";
     }
     for (const auto& r : results)
         if (!r.status.ok()) return exit_code(r.status);

@@ -10,7 +10,10 @@
 
 #include <barrier>
 #include <filesystem>
+#include <fstream>
+#include <iterator>
 #include <random>
+#include <regex>
 
 #include "fake_device.hpp"
 #include "process_util.hpp"
@@ -426,6 +429,41 @@ TEST(ServerFaults, ClientGivesUpAfterItsRetries) {
     EXPECT_NE(client.output().find("GetScene: "), std::string::npos) << client.output();
     EXPECT_NE(client.output().find("retrying in"), std::string::npos) << client.output();
     EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - begin).count(), 25.0);
+}
+
+/// The load client's report counts against the poses' schedule as well as the wall time: the
+/// wall time includes each stream's setup and the run's end, so a server answering every pose
+/// could never show streams x rate frames/s over it. Both must follow from the counts.
+TEST(ServerFaults, LoadReportCountsFramesAgainstThePosesSchedule) {
+    auto server = start_server();
+    const fs::path json = fs::path(CATGS_TEST_TMP) / ("load-report-" + std::to_string(getpid()) + ".json");
+    fs::create_directories(json.parent_path());
+    Child client({CATGS_CLIENT_BINARY, "--server", "127.0.0.1:" + std::to_string(server->port()), "load", "--scene",
+                  "city", "--streams", "2", "--duration", "2", "--rate", "15", "--width", "160", "--height", "90",
+                  "--json-out", json.string()});
+    const auto code = client.wait(std::chrono::seconds(60));
+    ASSERT_TRUE(code.has_value()) << client.output();
+    ASSERT_EQ(*code, 0) << client.output();
+    std::ifstream file(json);
+    const std::string text((std::istreambuf_iterator<char>(file)), std::istreambuf_iterator<char>());
+    const auto field = [&](const std::string& name) {
+        std::smatch m;
+        const std::regex pattern("\"" + name + "\": ([-+0-9.eE]+)");
+        EXPECT_TRUE(std::regex_search(text, m, pattern)) << name << " missing in\n" << text;
+        return m.empty() ? -1.0 : std::stod(m[1].str());
+    };
+    const double poses = field("poses_sent"), frames = field("frames"), schedule = field("schedule_s");
+    // 2 streams x 2 s x 15 Hz planned; a stream whose opening took long ends a pose or two early.
+    EXPECT_GT(poses, 0);
+    EXPECT_LE(poses, 2 * 30);
+    EXPECT_DOUBLE_EQ(schedule, 2.0);
+    EXPECT_GT(frames, 0);
+    EXPECT_LE(frames, poses);
+    EXPECT_NEAR(field("frames_per_s_of_schedule"), frames / schedule, 1e-9);
+    EXPECT_NEAR(field("poses_served"), frames / poses, 1e-9);
+    EXPECT_GT(field("duration_s"), schedule) << "the wall time includes the setup";
+    EXPECT_NE(client.output().find("poses served"), std::string::npos) << client.output();
+    fs::remove(json);
 }
 
 // ---------------------------------------------------------------------------------------
