@@ -91,6 +91,36 @@ TEST(DevicePlacement, TiesGoToFewestSessionsThenLowestIndex) {
     EXPECT_EQ(place(placement)->device(), 5);
 }
 
+// A burst of sessions opened before any of them renders: each new one weighs what the measured
+// open sessions weigh on average, and sessions that closed weigh nothing, however recently they
+// rendered. The device's own average still shows their frames, as GetScene reports it. (On two
+// H200s, 8 streams opened right after a 32-stream run all landed on one GPU by the device
+// averages: its 440 frames/s against 841 for 16 streams spread over both.)
+TEST(DevicePlacement, ABurstOfNewSessionsSpreadsOverTheDevices) {
+    DevicePlacement placement({0, 1}, 8);
+    {
+        // Device 0 served a heavy session that has just closed; device 1 a lighter one.
+        Seat heavy = place(placement), light = place(placement);
+        ASSERT_EQ(heavy->device(), 0);
+        heavy->record_render(900, kStart);
+        light->record_render(300, kStart);
+    }
+    EXPECT_GT(load_of(placement, 0, kStart), load_of(placement, 1, kStart)) << "the devices still show the frames";
+    std::vector<Seat> burst;
+    for (int i = 0; i < 4; ++i) burst.push_back(place(placement));
+    int on_device_0 = 0;
+    for (const Seat& seat : burst) on_device_0 += seat->device() == 0;
+    EXPECT_EQ(on_device_0, 2) << "closed sessions weigh nothing: the burst alternates";
+
+    // One of them measures 100 ms (0.05 s/s at tau 2 s): the other three, unmeasured, each weigh
+    // as much, so both devices weigh 0.1 and the next goes by sessions, then index.
+    burst[0]->record_render(100, kStart);  // device 0
+    Seat fifth = place(placement);
+    EXPECT_EQ(fifth->device(), 0);
+    // Device 0 now weighs 0.15 against 0.1: device 1.
+    EXPECT_EQ(place(placement)->device(), 1);
+}
+
 TEST(DevicePlacement, AdmissionCountsPerDevice) {
     DevicePlacement placement({0, 1}, 1);
     Seat a = place(placement);

@@ -9,7 +9,8 @@
 //   releases it (renderer_factory.cpp keeps one copy per scene and device).
 // - A device's load is its measured render time per second: each frame's FrameStats::total_ms
 //   (GPU event time on CUDA) feeds an exponentially decaying average.
-// - A new session goes to the device with the least load that still has room below
+// - A new session goes to the device whose open sessions weigh least (each its own measured
+//   load, one not yet measured at the mean of those measured) and that still has room below
 //   --max-sessions (a per-device limit); ties go to the fewest sessions, then the lowest index.
 //
 // Thread safety: every member may be called from any thread. The mutex is a leaf (lock
@@ -19,6 +20,7 @@
 #include <grpcpp/support/status.h>
 
 #include <chrono>
+#include <cstdint>
 #include <map>
 #include <memory>
 #include <mutex>
@@ -71,15 +73,16 @@ public:
     private:
         friend class DevicePlacement;
         struct State;
-        Seat(std::shared_ptr<State> state, int slot, int device, std::string scene_id);
+        Seat(std::shared_ptr<State> state, int slot, int device, std::string scene_id, std::uint64_t id);
         std::shared_ptr<State> state_;
         int slot_, device_;
         std::string scene_id_;
+        std::uint64_t id_;
     };
 
-    /// Places a session rendering `scene_id` on the least-loaded device with room, and makes
-    /// the scene resident there. RESOURCE_EXHAUSTED naming max-sessions when every device is
-    /// full.
+    /// Places a session rendering `scene_id` on the device with room whose open sessions weigh
+    /// least (see the header comment), and makes the scene resident there. RESOURCE_EXHAUSTED naming max-sessions when
+    /// every device is full.
     grpc::Status place(const std::string& scene_id, std::unique_ptr<Seat>* out, Clock::time_point now = Clock::now());
 
     /// An idle pooled renderer of device `slot` starts or stops holding `scene_id`.
