@@ -1,7 +1,8 @@
-// keys: one (tile | depth) sort key per tile-Gaussian pair (stages/keys.hpp), emitted at each
-// Gaussian's scanned offset, Gaussians in depth order (depth_order, sort.cuh) so that the sort
-// need only order tiles; rekey is the cached frames' keys, regrouping the key frame's pairs
-// in the depth order of the current pose. When a frame's pairs pass the pair budget it is cut into bands of tile
+// keys: the tile id of each tile-Gaussian pair (16 or 32 bits, tile_key.cuh) and its Gaussian,
+// emitted at each Gaussian's scanned offset, Gaussians in depth order (depth_order, sort.cuh),
+// so that the sort need only order tiles: the CPU's (tile | depth) keys (stages/keys.hpp) in
+// effect. rekey is the cached frames' keys, regrouping the key frame's pairs in the depth order
+// of the current pose. When a frame's pairs pass the pair budget it is cut into bands of tile
 // rows (band_rows), and count_band recounts each band before its scan.
 #pragma once
 
