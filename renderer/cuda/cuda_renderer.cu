@@ -371,11 +371,11 @@ void CudaRenderer<T>::Impl::keys(const Frame<T>& f, TileRows rows, std::uint64_t
                                f.options->culling, f.guard, g.projected.data(), g.touched.data(),
                                buffers.depth.ranked_offsets.data(), buffers.depth.order(), buffers.depth.ranked,
                                keep ? g.emission_offset.data() : nullptr, rows, banded, f.reproject_actual, pairs,
-                               p.tiles[0].keys(p.width), p.values[0].data()},
+                               p.tile_keys(0), p.values[0].data()},
                    s);
         if (keep) {
             p.emitted_tiles.reserve(pairs, p.width, s);
-            CATGS_CUDA_CHECK(cudaMemcpyAsync(p.emitted_tiles.keys(p.width).data, p.tiles[0].keys(p.width).data,
+            CATGS_CUDA_CHECK(cudaMemcpyAsync(p.emitted_keys().data, p.tile_keys(0).data,
                                              pairs * tile_key_bytes(p.width), cudaMemcpyDeviceToDevice, s));
         }
     }
@@ -412,11 +412,10 @@ void CudaRenderer<T>::Impl::rekey(const Frame<T>& f) {
     order_by_depth(g.sort_depth.data(), false);
     if (f.total > 0) {
         p.current = 0;
-        cuda::rekey(
-            RekeyArgs<T>{key_space, g.touched.data(), buffers.depth.order(), buffers.depth.ranked,
-                         buffers.depth.ranked_offsets.data(), g.emission_offset.data(), p.emitted_tiles.keys(p.width),
-                         g.projected.data(), f.view, f.options->culling, p.tiles[0].keys(p.width), p.values[0].data()},
-            stream);
+        cuda::rekey(RekeyArgs<T>{key_space, g.touched.data(), buffers.depth.order(), buffers.depth.ranked,
+                                 buffers.depth.ranked_offsets.data(), g.emission_offset.data(), p.emitted_keys(),
+                                 g.projected.data(), f.view, f.options->culling, p.tile_keys(0), p.values[0].data()},
+                    stream);
     }
     events.record(Event::keys, stream);
 }

@@ -111,7 +111,10 @@ struct PairBuffers {
     TileKeyArray emitted_tiles;
     DeviceArray<std::uint8_t> sort_temp;  // CUB's DeviceRadixSort
 
-    TileKeys sorted_tiles() const { return tiles[current].keys(width); }
+    /// The tile ids of tiles[which] and of emitted_tiles, as `width` reads them.
+    TileKeys tile_keys(int which) const { return tiles[which].keys(width); }
+    TileKeys emitted_keys() const { return emitted_tiles.keys(width); }
+    TileKeys sorted_tiles() const { return tile_keys(current); }
     std::size_t bytes() const {
         return tiles[0].bytes() + tiles[1].bytes() + values[0].bytes() + values[1].bytes() + emitted_tiles.bytes() +
                sort_temp.bytes();

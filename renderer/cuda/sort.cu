@@ -62,8 +62,7 @@ void sort(const SortArgs& a, cudaStream_t s) {
     PairBuffers& p = *a.pairs;
     with_tile_key(p.width, [&](auto key) {
         using Key = decltype(key);
-        cub::DoubleBuffer<Key> kb(key_data<Key>(p.tiles[p.current].keys(p.width)),
-                                  key_data<Key>(p.tiles[1 - p.current].keys(p.width)));
+        cub::DoubleBuffer<Key> kb(key_data<Key>(p.tile_keys(p.current)), key_data<Key>(p.tile_keys(1 - p.current)));
         cub::DoubleBuffer<std::uint32_t> vb(p.values[p.current].data(), p.values[1 - p.current].data());
         std::size_t temp_bytes = 0;
         CATGS_CUDA_CHECK(cub::DeviceRadixSort::SortPairs(nullptr, temp_bytes, kb, vb,
