@@ -8,6 +8,7 @@
 #if CATGS_HAVE_CUDA
 #include "cuda_check.hpp"
 #include "cuda_renderer.hpp"
+#include "device_compositor.hpp"
 #endif
 
 namespace catgs {
@@ -94,6 +95,11 @@ public:
         selection_.select();
         return renderer_.render_partial(camera, options, out, hints);
     }
+    FrameStats render_partial_on_device(const Camera& camera, const RenderOptions& options, DevicePartialImage& out,
+                                        const FrameHints* hints) override {
+        selection_.select();
+        return renderer_.render_partial_on_device(camera, options, out, hints);
+    }
     void reset_cache() override {
         selection_.select();
         renderer_.reset_cache();
@@ -157,6 +163,22 @@ std::unique_ptr<Renderer> make_renderer(const std::string& backend, Precision pr
         if (!cuda::device_available(&reason)) throw Error("backend 'cuda': no usable CUDA device (" + reason + ")");
         if (precision == Precision::double_) return std::make_unique<CudaBackend<double>>(device);
         return std::make_unique<CudaBackend<float>>(device);
+#else
+        (void)device;
+        throw Error("backend 'cuda' is not built into this binary (available: " + available_backends() + ")");
+#endif
+    }
+    throw Error("unknown backend '" + backend + "' (available: " + available_backends() + ")");
+}
+
+std::unique_ptr<PartialCompositor> make_partial_compositor(const std::string& backend, int device) {
+    if (backend == "cpu")
+        throw Error("backend 'cpu' has no device compositor: its shards composite on the host (composite_partials)");
+    if (backend == "cuda") {
+#if CATGS_HAVE_CUDA
+        std::string reason;
+        if (!cuda::device_available(&reason)) throw Error("backend 'cuda': no usable CUDA device (" + reason + ")");
+        return std::make_unique<cuda::DeviceCompositor>(device);
 #else
         (void)device;
         throw Error("backend 'cuda' is not built into this binary (available: " + available_backends() + ")");

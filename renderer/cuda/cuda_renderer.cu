@@ -118,13 +118,19 @@ bool CudaRenderer<T>::copies_while_drawing() const {
 template <typename T>
 FrameStats CudaRenderer<T>::render(const Camera& camera, const RenderOptions& options, ImageRGB8* rgb8,
                                    ImageF* rgb_float, const FrameHints* hints) {
-    return impl_->render(camera, options, HostOutputs{rgb8, rgb_float, nullptr}, hints);
+    return impl_->render(camera, options, HostOutputs{rgb8, rgb_float, nullptr, nullptr}, hints);
 }
 
 template <typename T>
 FrameStats CudaRenderer<T>::render_partial(const Camera& camera, const RenderOptions& options, PartialImage& out,
                                            const FrameHints* hints) {
-    return impl_->render(camera, options, HostOutputs{nullptr, nullptr, &out}, hints);
+    return impl_->render(camera, options, HostOutputs{nullptr, nullptr, &out, nullptr}, hints);
+}
+
+template <typename T>
+FrameStats CudaRenderer<T>::render_partial_on_device(const Camera& camera, const RenderOptions& options,
+                                                     DevicePartialImage& out, const FrameHints* hints) {
+    return impl_->render(camera, options, HostOutputs{nullptr, nullptr, nullptr, &out}, hints);
 }
 
 // Key frame: chunk_cull -> preprocess -> scan -> keys -> sort -> ranges -> split, in bands of
@@ -138,7 +144,7 @@ FrameStats CudaRenderer<T>::Impl::render(const Camera& camera, const RenderOptio
     validate(camera.intrinsics, "camera '" + camera.name + "'");
     Frame<T> f = plan_frame(camera, options, hints);
     // A partial frame stops before the background: with zero, C + T * background is C.
-    if (out.partial) f.background = Vec3<T>{T(0), T(0), T(0)};
+    if (out.any_partial()) f.background = Vec3<T>{T(0), T(0), T(0)};
     begin_frame(f, out);
     if (f.plan.key) {
         chunk_cull(f);
@@ -240,8 +246,8 @@ void CudaRenderer<T>::Impl::begin_frame(const Frame<T>& f, const HostOutputs& ou
     t.split_tiles.reserve(f.tiles, s);
     PixelBuffers<T>& p = buffers.pixels;
     if (out.rgb8) p.image_rgb8.reserve(3 * f.pixels, s);
-    if (out.rgb || out.partial) p.image_float.reserve(3 * f.pixels, s);
-    if (out.partial) {
+    if (out.rgb || out.any_partial()) p.image_float.reserve(3 * f.pixels, s);
+    if (out.any_partial()) {
         p.image_transmittance.reserve(f.pixels, s);
         p.image_stopped.reserve(f.pixels, s);
     }

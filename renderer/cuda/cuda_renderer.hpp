@@ -135,6 +135,11 @@ public:
     /// of a sharded frame contributes (sharded_renderer.hpp); options.background is ignored.
     FrameStats render_partial(const Camera& camera, const RenderOptions& options, PartialImage& out,
                               const FrameHints* hints = nullptr);
+    /// render_partial left in this renderer's pixel buffers on the current device, copied
+    /// nowhere: `out` points at them until the next frame (the stream is synchronised, so they
+    /// are complete on return). A PartialCompositor reads them (device_compositor.hpp).
+    FrameStats render_partial_on_device(const Camera& camera, const RenderOptions& options, DevicePartialImage& out,
+                                        const FrameHints* hints = nullptr);
 
     /// Forgets the inter-frame cache and the pose history (a new stream).
     void reset_cache();

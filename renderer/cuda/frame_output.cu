@@ -18,16 +18,22 @@ template <typename T>
 PixelOutputs CudaRenderer<T>::Impl::device_outputs(const Frame<T>& f, const HostOutputs& out) {
     PixelBuffers<T>& p = buffers.pixels;
     return PixelOutputs{out.rgb8 ? p.image_rgb8.data() : nullptr,
-                        out.rgb || out.partial ? p.image_float.data() : nullptr,
-                        out.partial ? p.image_transmittance.data() : nullptr,
-                        out.partial ? p.image_stopped.data() : nullptr,
+                        out.rgb || out.any_partial() ? p.image_float.data() : nullptr,
+                        out.any_partial() ? p.image_transmittance.data() : nullptr,
+                        out.any_partial() ? p.image_stopped.data() : nullptr,
                         copy_waits_on_counts() ? copy.tiles_drawn : nullptr,
                         rows_per_copy_band(f)};
 }
 
 template <typename T>
 CopyOutArgs CudaRenderer<T>::Impl::copy_out_args(const Frame<T>& f, const HostOutputs& out) {
-    const PixelOutputs device = device_outputs(f, out);
+    PixelOutputs device = device_outputs(f, out);
+    // A partial left on the device for a compositor is not copied.
+    if (!out.rgb && !out.partial) device.rgb = nullptr;
+    if (!out.partial) {
+        device.transmittance = nullptr;
+        device.stopped = nullptr;
+    }
     return CopyOutArgs{f.view.width, device.rgb8,     device.rgb,          device.transmittance, device.stopped,
                        &host.rgb8,   &host.rgb_float, &host.transmittance, &host.stopped};
 }
@@ -113,6 +119,15 @@ void CudaRenderer<T>::Impl::copy_out(const Frame<T>& f, const HostOutputs& out) 
     }
     CATGS_CUDA_CHECK(cudaStreamSynchronize(stream));
     events.add(Stage::copy_out, Event::merge, Event::copy_out);
+    if (out.device_partial) {
+        DevicePartialImage& d = *out.device_partial;
+        CATGS_CUDA_CHECK(cudaGetDevice(&d.device));
+        d.width = width;
+        d.height = height;
+        d.colour = buffers.pixels.image_float.data();
+        d.transmittance = buffers.pixels.image_transmittance.data();
+        d.stopped = buffers.pixels.image_stopped.data();
+    }
 }
 
 template PixelOutputs CudaRenderer<float>::Impl::device_outputs(const Frame<float>&, const HostOutputs&);

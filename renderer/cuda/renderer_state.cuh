@@ -66,6 +66,11 @@ struct HostOutputs {
     ImageRGB8* rgb8 = nullptr;
     ImageF* rgb = nullptr;
     PartialImage* partial = nullptr;
+    /// A partial left in the pixel buffers for a compositor (render_partial_on_device): drawn
+    /// as `partial` is, copied nowhere.
+    DevicePartialImage* device_partial = nullptr;
+
+    bool any_partial() const { return partial || device_partial; }
 };
 
 template <typename T>

@@ -1,11 +1,13 @@
 #include "catgs/sharded_renderer.hpp"
 
+#include <algorithm>
 #include <chrono>
 #include <string>
 #include <utility>
 
 #include "catgs/error.hpp"
 #include "catgs/parallel.hpp"
+#include "catgs/stage.hpp"
 #include "catgs/stages/blend.hpp"
 #include "catgs/stages/split.hpp"
 
@@ -95,23 +97,80 @@ ShardedRenderer::ShardedRenderer(const Scene& scene, ShardPlan plan, const Rende
 
 ShardedFrameStats ShardedRenderer::render(const Camera& camera, const RenderOptions& options, ImageF& out,
                                           const FrameHints* hints) {
+    return render_frame(camera, options, &out, nullptr, hints);
+}
+
+ShardedFrameStats ShardedRenderer::render_rgb8(const Camera& camera, const RenderOptions& options, ImageRGB8& out,
+                                               const FrameHints* hints) {
+    return render_frame(camera, options, nullptr, &out, hints);
+}
+
+ShardedFrameStats ShardedRenderer::render_frame(const Camera& camera, const RenderOptions& options, ImageF* rgb,
+                                                ImageRGB8* rgb8, const FrameHints* hints) {
     const auto start = Clock::now();
     ShardedFrameStats stats;
     stats.shards.resize(renderers_.size());
+    device_partials_.resize(renderers_.size());
     const int workers = concurrent_ ? static_cast<int>(renderers_.size()) : 1;
     parallel_for(renderers_.size(), 1, workers, [&](std::size_t first, std::size_t last) {
         for (std::size_t s = first; s < last; ++s)
-            stats.shards[s] = renderers_[s]->render_partial(camera, options, partials_[s], hints);
+            stats.shards[s] = compositor_
+                                  ? renderers_[s]->render_partial_on_device(camera, options, device_partials_[s], hints)
+                                  : renderers_[s]->render_partial(camera, options, partials_[s], hints);
     });
     stats.render_ms = elapsed_ms(start);
     const auto merge_start = Clock::now();
     stats.order = shard_visibility_order(plan_, camera);
-    std::vector<const PartialImage*> ordered;
-    for (int s : stats.order) ordered.push_back(&partials_[static_cast<std::size_t>(s)]);
-    composite_partials(ordered, options.background, out, threads_);
-    stats.merge_ms = elapsed_ms(merge_start);
+    if (compositor_) {
+        std::vector<DevicePartialImage> ordered;
+        for (int s : stats.order) ordered.push_back(device_partials_[static_cast<std::size_t>(s)]);
+        const CompositeTimes t = compositor_->composite(ordered, options.background, rgb, rgb8);
+        stats.transfer_ms = t.transfer_ms;
+        stats.merge_ms = t.merge_ms;
+        stats.copy_out_ms = t.copy_out_ms;
+        stats.composited_on = compositor_->device();
+        stats.peer_direct = t.peer_direct;
+        stats.peer_staged = t.peer_staged;
+    } else {
+        std::vector<const PartialImage*> ordered;
+        for (int s : stats.order) ordered.push_back(&partials_[static_cast<std::size_t>(s)]);
+        ImageF composite;
+        composite_partials(ordered, options.background, rgb ? *rgb : composite, threads_);
+        if (rgb8) *rgb8 = to_rgb8(rgb ? *rgb : composite);
+        stats.merge_ms = elapsed_ms(merge_start);
+    }
     stats.total_ms = elapsed_ms(start);
     return stats;
+}
+
+FrameStats combine_shard_stats(const ShardedFrameStats& sharded, bool concurrent) {
+    FrameStats s;
+    s.key_frame = false;
+    s.bands = 0;
+    s.window = 0;
+    for (const FrameStats& part : sharded.shards) {
+        s.visible += part.visible;
+        s.pairs += part.pairs;
+        s.chunks += part.chunks;
+        s.chunks_culled += part.chunks_culled;
+        s.arena_bytes += part.arena_bytes;
+        s.tasks += part.tasks;
+        s.split_tasks += part.split_tasks;
+        s.split_k = std::max(s.split_k, part.split_k);
+        s.longest_list = std::max(s.longest_list, part.longest_list);
+        s.bands = std::max(s.bands, part.bands);
+        s.key_frame = s.key_frame || part.key_frame;
+        s.window = std::max(s.window, part.window);
+        for (Stage stage : kStages)
+            s.stage_ms[stage] = concurrent ? std::max(s.stage_ms[stage], part.stage_ms[stage])
+                                           : s.stage_ms[stage] + part.stage_ms[stage];
+    }
+    s.bands = std::max(s.bands, 1);
+    s.window = std::max(s.window, 1);
+    s.stage_ms[Stage::merge] += sharded.merge_ms;
+    s.stage_ms[Stage::copy_out] += sharded.transfer_ms + sharded.copy_out_ms;
+    s.total_ms = sharded.total_ms;
+    return s;
 }
 
 void ShardedRenderer::reset_cache() {

@@ -22,8 +22,10 @@
 #include "catgs/renderer.hpp"
 #include "catgs/scene_io.hpp"
 #include "catgs/scene_ops.hpp"
+#include "catgs/sharded_renderer.hpp"
 #include "catgs/trajectory.hpp"
 #include "cli_options.hpp"
+#include "shard_flags.hpp"
 
 namespace {
 
@@ -50,6 +52,7 @@ struct Options {
     int warmup = 5;
     long max_frames = -1;
     int threads = 0;
+    catgs::cli::ShardFlags sharding;
     bool quiet = false;
     bool image_digests = false;
 };
@@ -103,6 +106,47 @@ std::string image_digest(const catgs::ImageRGB8& image) {
     return text;
 }
 
+/// A sharded renderer (--shards) timed like any renderer: each frame's stats are the shards'
+/// combined (combine_shard_stats), and the last frame's per-shard detail is kept for the JSON.
+class ShardedFrames final : public catgs::Renderer {
+public:
+    explicit ShardedFrames(std::unique_ptr<catgs::ShardedRenderer> sharded) : sharded_(std::move(sharded)) {}
+    void set_scene(std::shared_ptr<const catgs::Scene>) override {
+        throw catgs::Error("a sharded renderer takes its scene when it plans its shards");
+    }
+    catgs::FrameStats render(const catgs::Camera& camera, const catgs::RenderOptions& options, catgs::ImageF& out,
+                             const catgs::FrameHints* hints) override {
+        last_ = sharded_->render(camera, options, out, hints);
+        return catgs::combine_shard_stats(last_, sharded_->concurrent());
+    }
+    catgs::FrameStats render_rgb8(const catgs::Camera& camera, const catgs::RenderOptions& options,
+                                  catgs::ImageRGB8& out, const catgs::FrameHints* hints) override {
+        last_ = sharded_->render_rgb8(camera, options, out, hints);
+        return catgs::combine_shard_stats(last_, sharded_->concurrent());
+    }
+    void reset_cache() override { sharded_->reset_cache(); }
+    std::string name() const override { return sharded_->name(); }
+    const catgs::ShardedRenderer& sharded() const { return *sharded_; }
+    /// The last frame's composite and per-shard times, for its JSON entry.
+    nlohmann::json last_frame_json() const {
+        nlohmann::json shards = nlohmann::json::array();
+        for (const catgs::FrameStats& part : last_.shards)
+            shards.push_back({{"total_ms", part.total_ms}, {"pairs", part.pairs}, {"visible", part.visible}});
+        return {{"shard_render_ms", last_.render_ms},
+                {"shard_transfer_ms", last_.transfer_ms},
+                {"shard_merge_ms", last_.merge_ms},
+                {"shard_copy_out_ms", last_.copy_out_ms},
+                {"shard_peer_direct", last_.peer_direct},
+                {"shard_peer_staged", last_.peer_staged},
+                {"shard_order", last_.order},
+                {"shards", shards}};
+    }
+
+private:
+    std::unique_ptr<catgs::ShardedRenderer> sharded_;
+    catgs::ShardedFrameStats last_;
+};
+
 Result run_config(catgs::Renderer& renderer, const std::vector<catgs::Camera>& cameras, const Config& config,
                   const Options& o, const std::vector<catgs::ImageRGB8>& references) {
     Result r;
@@ -153,6 +197,8 @@ Result run_config(catgs::Renderer& renderer, const std::vector<catgs::Camera>& c
             frame["fraction_over_one_level"] = e.fraction_over_one;
         }
         if (o.image_digests) frame["image_digest"] = image_digest(image);
+        if (const auto* sharded = dynamic_cast<const ShardedFrames*>(&renderer))
+            frame.update(sharded->last_frame_json());
         r.frames.push_back(frame);
         if (!o.quiet && (f + 1) % std::max<std::size_t>(1, cameras.size() / 5) == 0)
             std::fprintf(stderr, "%s: %zu/%zu frames\n", config.name.c_str(), f + 1, cameras.size());
@@ -291,10 +337,18 @@ int run(const Options& o) {
         cameras.resize(static_cast<std::size_t>(o.max_frames));
     if (cameras.empty()) throw catgs::Error("the camera path has no cameras");
 
-    auto renderer = catgs::make_renderer(o.backend, precision, o.threads);
-    renderer->set_scene(scene);
+    std::unique_ptr<catgs::Renderer> renderer;
+    std::string renderer_name;
+    if (auto sharded = catgs::cli::make_sharded_renderer(o.sharding, *scene, o.backend, precision, o.threads)) {
+        renderer_name = catgs::cli::describe_sharding(o.sharding, *sharded, o.backend);
+        renderer = std::make_unique<ShardedFrames>(std::move(sharded));
+    } else {
+        renderer = catgs::make_renderer(o.backend, precision, o.threads);
+        renderer->set_scene(scene);
+        renderer_name = renderer->name();
+    }
     std::printf("scene: %s\nrenderer: %s, %dx%d, %zu frames, %d warm-up renders, %zu configuration(s)\n",
-                catgs::describe(*scene).c_str(), renderer->name().c_str(), cameras[0].intrinsics.width,
+                catgs::describe(*scene).c_str(), renderer_name.c_str(), cameras[0].intrinsics.width,
                 cameras[0].intrinsics.height, cameras.size(), o.warmup, configs.size());
     const std::vector<catgs::ImageRGB8> references = render_references(o, scene, cameras);
     std::fflush(stdout);
@@ -313,7 +367,8 @@ int run(const Options& o) {
                            {"scene_spec", o.scene},
                            {"grid", o.grid},
                            {"trajectory", o.trajectory},
-                           {"renderer", renderer->name()},
+                           {"renderer", renderer_name},
+                           {"shards", o.sharding.shards},
                            {"width", cameras[0].intrinsics.width},
                            {"height", cameras[0].intrinsics.height},
                            {"warmup", o.warmup},
@@ -366,6 +421,7 @@ int main(int argc, char** argv) {
     app.add_option("--threads", o.threads, "CPU threads for the cpu backend (0: all)")
         ->check(catgs::thread_count())
         ->capture_default_str();
+    catgs::cli::add_shard_flags(app, o.sharding);
     app.add_option("--json-out", o.json_out, "write per-frame and summary results as JSON to this file");
     app.add_option("--csv-out", o.csv_out, "write one CSV row per configuration to this file");
     app.add_flag("--quiet", o.quiet, "no progress output on stderr");

@@ -18,6 +18,7 @@
 #include "catgs/sharded_renderer.hpp"
 #include "catgs/trajectory.hpp"
 #include "cli_options.hpp"
+#include "shard_flags.hpp"
 #include "image_file.hpp"
 
 namespace {
@@ -38,7 +39,7 @@ struct Options {
     double fov = 70.0;
     double near_plane = catgs::kDefaultNearPlane;
     int threads = 0;
-    int shards = 1;
+    catgs::cli::ShardFlags sharding;
     long max_frames = -1;
     bool drop_invalid = false;
     bool info = false;
@@ -83,6 +84,7 @@ nlohmann::json frame_json(std::size_t i, const std::string& file, const catgs::F
         if (stage != catgs::Stage::encode) frame[std::string(catgs::stage_name(stage)) + "_ms"] = s.stage_ms[stage];
     if (sharded) {
         frame["shard_merge_ms"] = sharded->merge_ms;
+        frame["shard_transfer_ms"] = sharded->transfer_ms;
         frame["shard_order"] = sharded->order;
         nlohmann::json per_shard = nlohmann::json::array();
         for (const catgs::FrameStats& part : sharded->shards)
@@ -111,24 +113,6 @@ void print_frame(std::size_t i, const catgs::FrameStats& s, const catgs::Sharded
                 static_cast<unsigned long long>(s.visible), static_cast<unsigned long long>(s.pairs),
                 static_cast<unsigned long long>(s.split_tasks), band_part, shard_part);
     std::fflush(stdout);
-}
-
-/// A sharded frame as one frame's stats: the shards' counts and stage times summed (they render
-/// one after another), a key frame if any shard's was, the whole frame's time.
-catgs::FrameStats sum_shards(const catgs::ShardedFrameStats& sharded) {
-    catgs::FrameStats s;
-    s.key_frame = false;
-    for (const catgs::FrameStats& part : sharded.shards) {
-        s.visible += part.visible;
-        s.pairs += part.pairs;
-        s.split_tasks += part.split_tasks;
-        s.longest_list = std::max(s.longest_list, part.longest_list);
-        s.key_frame = s.key_frame || part.key_frame;
-        s.window = std::max(s.window, part.window);
-        for (catgs::Stage stage : catgs::kStages) s.stage_ms[stage] += part.stage_ms[stage];
-    }
-    s.total_ms = sharded.total_ms;
-    return s;
 }
 
 int run(const Options& o) {
@@ -181,19 +165,14 @@ int run(const Options& o) {
 
     // --shards K: one renderer per shard, each holding its shard's Gaussians (sharded_renderer.hpp).
     std::unique_ptr<catgs::Renderer> renderer;
-    std::unique_ptr<catgs::ShardedRenderer> sharded;
-    auto make = [&](int) { return catgs::make_renderer(o.backend, precision, o.threads); };
-    if (o.shards > 1) {
-        try {
-            sharded = std::make_unique<catgs::ShardedRenderer>(*scene, o.shards, make, o.threads);
-        } catch (const catgs::Error& e) {
-            throw catgs::Error("--shards " + std::to_string(o.shards) + ": " + e.what());
-        }
-    } else {
-        renderer = make(0);
+    std::unique_ptr<catgs::ShardedRenderer> sharded =
+        catgs::cli::make_sharded_renderer(o.sharding, *scene, o.backend, precision, o.threads);
+    if (!sharded) {
+        renderer = catgs::make_renderer(o.backend, precision, o.threads);
         renderer->set_scene(scene);
     }
-    const std::string renderer_name = sharded ? sharded->name() : renderer->name();
+    const std::string renderer_name =
+        sharded ? catgs::cli::describe_sharding(o.sharding, *sharded, o.backend) : renderer->name();
     if (!o.json)
         std::cout << "scene: " << catgs::describe(*scene) << "\nrenderer: " << renderer_name << ", "
                   << catgs::cli::describe_pipeline(render_options) << ", " << cameras.size() << " frames\n";
@@ -207,9 +186,9 @@ int run(const Options& o) {
         catgs::FrameStats s;
         catgs::ShardedFrameStats shard_stats;
         if (sharded) {
-            shard_stats = sharded->render(cameras[i], render_options, image);
-            s = sum_shards(shard_stats);
-            if (o.format != "exr") image8 = catgs::to_rgb8(image);
+            shard_stats = o.format == "exr" ? sharded->render(cameras[i], render_options, image)
+                                            : sharded->render_rgb8(cameras[i], render_options, image8);
+            s = catgs::combine_shard_stats(shard_stats, sharded->concurrent());
         } else {
             s = o.format == "exr" ? renderer->render(cameras[i], render_options, image)
                                   : renderer->render_rgb8(cameras[i], render_options, image8);
@@ -278,11 +257,7 @@ int main(int argc, char** argv) {
         ->check(catgs::horizontal_fov());
     app.add_option("--near", o.near_plane, "near plane (view-space z)")->capture_default_str();
     app.add_option("--threads", o.threads, "CPU threads (0: all)")->check(catgs::thread_count())->capture_default_str();
-    app.add_option("--shards", o.shards,
-                   "render each frame as K spatial shards of the scene, one renderer each (taking turns on the "
-                   "backend's device), composited front to back (docs/sharding.md)")
-        ->capture_default_str()
-        ->check(CLI::Range(1, catgs::kMaxShards));
+    catgs::cli::add_shard_flags(app, o.sharding);
     app.add_option("--max-frames", o.max_frames, "render at most this many cameras (-1: all)")->capture_default_str();
     app.add_option("--sh-degree", o.sh_degree,
                    "render with the SH coefficients above this degree (0..3) dropped; 0: view-independent colour "

@@ -30,4 +30,15 @@ struct PartialImage {
     }
 };
 
+/// A partial frame left in a GPU's memory (Renderer::render_partial_on_device), laid out as
+/// PartialImage: device pointers into the renderer's own buffers, valid until that renderer's
+/// next frame. A PartialCompositor (renderer.hpp) reads them, on their device or another.
+struct DevicePartialImage {
+    int device = -1;  ///< the CUDA device holding the buffers
+    int width = 0, height = 0;
+    const float* colour = nullptr;  ///< 3 per pixel
+    const float* transmittance = nullptr;
+    const std::uint8_t* stopped = nullptr;
+};
+
 }  // namespace catgs

@@ -15,7 +15,10 @@
 //
 // Shards render one after another by default (on the CPU each renderer uses every core), or
 // at once, one thread each (set_concurrent: renderers on separate GPUs, or single-threaded CPU
-// renderers); only their partials travel (4 floats and a byte per pixel each).
+// renderers); only their partials travel (4 floats and a byte per pixel each). By default they
+// travel to the host and composite there; with set_compositor (GPU renderers) they stay on
+// their GPUs and one GPU gathers and composites them (device_compositor.hpp), so that only
+// the finished image crosses PCIe.
 #pragma once
 
 #include <array>
@@ -40,9 +43,21 @@ struct ShardedFrameStats {
     std::vector<FrameStats> shards;  ///< per shard, by shard index
     std::vector<int> order;          ///< the shards front to back for this frame's camera
     double render_ms = 0;            ///< wall time of every shard's partial
-    double merge_ms = 0;             ///< the composite
-    double total_ms = 0;
+    double merge_ms = 0;             ///< the composite (on a GPU: its kernel, CUDA events)
+    /// On a GPU (set_compositor): the other devices' partials copied to the compositing one,
+    /// and the finished image to the host (CUDA events); 0 on the host.
+    double transfer_ms = 0, copy_out_ms = 0;
+    int composited_on = -1;  ///< the compositing device; -1: the host
+    int peer_direct = 0;     ///< partials copied device to device (peers: NVLink or PCIe)
+    int peer_staged = 0;     ///< partials the driver staged through host memory
+    double total_ms = 0;     ///< wall time of the whole frame
 };
+
+/// A sharded frame as one frame's stats: the shards' counts summed, a key frame if any shard's
+/// was, each stage's time summed over the shards when they render in turn or the slowest
+/// shard's when they render at once (`concurrent`); the composite's time added to merge, the
+/// transfer between GPUs and the final image's copy to copy_out; total is the frame's wall time.
+FrameStats combine_shard_stats(const ShardedFrameStats& sharded, bool concurrent);
 
 class ShardedRenderer {
 public:
@@ -59,9 +74,20 @@ public:
     /// Renders every shard's partial at `camera` and composites them into `out`.
     ShardedFrameStats render(const Camera& camera, const RenderOptions& options, ImageF& out,
                              const FrameHints* hints = nullptr);
+    /// The same in 8 bits (a GPU compositor quantises on the device and copies a quarter of
+    /// the bytes; the host composite quantises its float image).
+    ShardedFrameStats render_rgb8(const Camera& camera, const RenderOptions& options, ImageRGB8& out,
+                                  const FrameHints* hints = nullptr);
+    /// Composites on a GPU: each shard's renderer leaves its partial on its device
+    /// (Renderer::render_partial_on_device, which its backend must have) and `compositor`
+    /// gathers them. Null: back to the host composite.
+    void set_compositor(std::unique_ptr<PartialCompositor> compositor) { compositor_ = std::move(compositor); }
+    /// The compositing device; -1: the host.
+    int compositor_device() const { return compositor_ ? compositor_->device() : -1; }
     /// Renders the shards at once, one thread each, instead of one after another. The image is
     /// the same either way: each shard writes only its own partial.
     void set_concurrent(bool concurrent) { concurrent_ = concurrent; }
+    bool concurrent() const { return concurrent_; }
     /// Forgets every shard renderer's inter-frame cache.
     void reset_cache();
 
@@ -72,10 +98,15 @@ public:
     std::string name() const;
 
 private:
+    ShardedFrameStats render_frame(const Camera& camera, const RenderOptions& options, ImageF* rgb, ImageRGB8* rgb8,
+                                   const FrameHints* hints);
+
     ShardPlan plan_;
     std::vector<std::shared_ptr<const Scene>> scenes_;
     std::vector<std::unique_ptr<Renderer>> renderers_;
     std::vector<PartialImage> partials_;
+    std::vector<DevicePartialImage> device_partials_;
+    std::unique_ptr<PartialCompositor> compositor_;
     int threads_;
     bool concurrent_ = false;
 };
