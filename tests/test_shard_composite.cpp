@@ -170,18 +170,20 @@ FrameStats shard_stats(double preprocess, double rasterize, std::uint64_t pairs,
     s.key_frame = key;
     s.window = key ? 1 : 4;
     s.longest_list = pairs / 10;
+    s.total_ms = preprocess + rasterize + 0.0625;
     return s;
 }
 
-// Stages add up when the shards take turns and the slowest shard's counts when they render at
-// once; the composite's merge and the transfers go to their stages; counts add up.
+// Stages and totals add up when the shards take turns and the slowest shard's counts when
+// they render at once; the composite's merge and the transfers go to their stages; counts add
+// up.
 TEST(ShardComposite, CombinedStatsSumInTurnAndTakeTheSlowestAtOnce) {
     ShardedFrameStats sharded;
     sharded.shards = {shard_stats(1.0, 3.0, 1000, false), shard_stats(2.0, 0.5, 3000, true)};
     sharded.merge_ms = 0.25;
     sharded.transfer_ms = 0.5;
     sharded.copy_out_ms = 0.125;
-    sharded.total_ms = 9.0;
+    sharded.total_ms = 9.0;  // the wall time: not what the combined frame reports
     const FrameStats in_turn = combine_shard_stats(sharded, false);
     EXPECT_DOUBLE_EQ(in_turn.stage_ms[Stage::preprocess], 3.0);
     EXPECT_DOUBLE_EQ(in_turn.stage_ms[Stage::rasterize], 3.5);
@@ -197,8 +199,11 @@ TEST(ShardComposite, CombinedStatsSumInTurnAndTakeTheSlowestAtOnce) {
         EXPECT_EQ(s.longest_list, 300u);
         EXPECT_TRUE(s.key_frame);
         EXPECT_EQ(s.window, 4);
-        EXPECT_DOUBLE_EQ(s.total_ms, 9.0);
     }
+    // GPU time as an unsharded frame counts it: the shards' (4.0625 and 2.5625 ms), summed or
+    // the slowest, and the composite's 0.875.
+    EXPECT_DOUBLE_EQ(in_turn.total_ms, 4.0625 + 2.5625 + 0.875);
+    EXPECT_DOUBLE_EQ(at_once.total_ms, 4.0625 + 0.875);
 }
 
 TEST(ShardComposite, BadRequestsAreNamed) {

@@ -16,6 +16,10 @@
 namespace catgs::cuda {
 namespace {
 
+/// Bands the finished image is copied to the host in (copy_out): enough that the host's copy
+/// of one overlaps the device's copy of the next, few enough that each copy is megabytes.
+constexpr int kCopyBands = 8;
+
 float event_ms(cudaEvent_t from, cudaEvent_t to) {
     float ms = 0;
     CATGS_CUDA_CHECK(cudaEventElapsedTime(&ms, from, to));
@@ -69,10 +73,12 @@ struct DeviceCompositor::Impl {
     /// The pointers the composite reads for partial `index`: where it lies, or its staged copy.
     void gather(const DevicePartialImage& partial, std::size_t index, std::size_t pixels, CompositeTimes& times,
                 const float** colour, const float** transmittance, const std::uint8_t** stopped);
+    void copy_out(int width, int height, ImageF* rgb, ImageRGB8* rgb8);
 
     int device;
     cudaStream_t stream = nullptr;
     std::array<cudaEvent_t, kMarks> marks{};
+    std::array<cudaEvent_t, kCopyBands> band_copied{};
     std::vector<std::unique_ptr<Staged>> staged;
     DeviceArray<std::uint8_t> image_rgb8;
     DeviceArray<float> image_rgb;
@@ -80,6 +86,48 @@ struct DeviceCompositor::Impl {
     PinnedArray<float> host_rgb;
     std::map<int, bool> peers;
 };
+
+/// The finished image to the caller, in bands of rows: each band's copy to pinned memory is
+/// enqueued at once, and the host takes band b into the caller's image while the later bands
+/// are still on their way (the host's copy out of pinned memory is the slower of the two).
+void DeviceCompositor::Impl::copy_out(int width, int height, ImageF* rgb, ImageRGB8* rgb8) {
+    Impl& c = *this;
+    const std::size_t row = 3 * static_cast<std::size_t>(width);
+    const int rows_per_band = (height + kCopyBands - 1) / kCopyBands;
+    for (int band = 0; band * rows_per_band < height; ++band) {
+        const std::size_t first = row * static_cast<std::size_t>(band * rows_per_band);
+        const std::size_t count =
+            row * static_cast<std::size_t>(std::min(rows_per_band, height - band * rows_per_band));
+        if (rgb8)
+            CATGS_CUDA_CHECK(cudaMemcpyAsync(c.host_rgb8.data() + first, c.image_rgb8.data() + first, count,
+                                             cudaMemcpyDeviceToHost, c.stream));
+        if (rgb)
+            CATGS_CUDA_CHECK(cudaMemcpyAsync(c.host_rgb.data() + first, c.image_rgb.data() + first,
+                                             count * sizeof(float), cudaMemcpyDeviceToHost, c.stream));
+        CATGS_CUDA_CHECK(cudaEventRecord(c.band_copied[static_cast<std::size_t>(band)], c.stream));
+    }
+    CATGS_CUDA_CHECK(cudaEventRecord(c.marks[Impl::copied], c.stream));
+    const std::size_t values = row * static_cast<std::size_t>(height);
+    if (rgb8) {
+        rgb8->width = width;
+        rgb8->height = height;
+        rgb8->rgb.resize(values);
+    }
+    if (rgb) {
+        rgb->width = width;
+        rgb->height = height;
+        rgb->rgb.resize(values);
+    }
+    for (int band = 0; band * rows_per_band < height; ++band) {
+        CATGS_CUDA_CHECK(cudaEventSynchronize(c.band_copied[static_cast<std::size_t>(band)]));
+        const std::size_t first = row * static_cast<std::size_t>(band * rows_per_band);
+        const std::size_t count =
+            row * static_cast<std::size_t>(std::min(rows_per_band, height - band * rows_per_band));
+        if (rgb8) std::copy_n(c.host_rgb8.data() + first, count, rgb8->rgb.data() + first);
+        if (rgb) std::copy_n(c.host_rgb.data() + first, count, rgb->rgb.data() + first);
+    }
+    CATGS_CUDA_CHECK(cudaEventSynchronize(c.marks[Impl::copied]));
+}
 
 DeviceCompositor::DeviceCompositor(int device) : impl_(std::make_unique<Impl>(device)) {
     int count = 0;
@@ -90,6 +138,7 @@ DeviceCompositor::DeviceCompositor(int device) : impl_(std::make_unique<Impl>(de
     CATGS_CUDA_CHECK(cudaSetDevice(device));
     CATGS_CUDA_CHECK(cudaStreamCreateWithFlags(&impl_->stream, cudaStreamNonBlocking));
     for (cudaEvent_t& e : impl_->marks) CATGS_CUDA_CHECK(cudaEventCreate(&e));
+    for (cudaEvent_t& e : impl_->band_copied) CATGS_CUDA_CHECK(cudaEventCreateWithFlags(&e, cudaEventDisableTiming));
 }
 
 DeviceCompositor::~DeviceCompositor() {
@@ -97,6 +146,8 @@ DeviceCompositor::~DeviceCompositor() {
     cudaSetDevice(impl_->device);
     if (impl_->stream) cudaStreamSynchronize(impl_->stream);
     for (cudaEvent_t e : impl_->marks)
+        if (e) cudaEventDestroy(e);
+    for (cudaEvent_t e : impl_->band_copied)
         if (e) cudaEventDestroy(e);
     cudaStream_t stream = impl_->stream;
     impl_.reset();  // its buffers are freed (stream-ordered) before their stream goes
@@ -178,26 +229,7 @@ CompositeTimes DeviceCompositor::composite(const std::vector<DevicePartialImage>
     CATGS_CUDA_CHECK(cudaEventRecord(c.marks[Impl::transferred], c.stream));
     composite_partials(args, c.stream);
     CATGS_CUDA_CHECK(cudaEventRecord(c.marks[Impl::merged], c.stream));
-    if (rgb8)
-        CATGS_CUDA_CHECK(
-            cudaMemcpyAsync(c.host_rgb8.data(), c.image_rgb8.data(), 3 * pixels, cudaMemcpyDeviceToHost, c.stream));
-    if (rgb)
-        CATGS_CUDA_CHECK(cudaMemcpyAsync(c.host_rgb.data(), c.image_rgb.data(), 3 * pixels * sizeof(float),
-                                         cudaMemcpyDeviceToHost, c.stream));
-    CATGS_CUDA_CHECK(cudaEventRecord(c.marks[Impl::copied], c.stream));
-    CATGS_CUDA_CHECK(cudaEventSynchronize(c.marks[Impl::copied]));
-
-    const int width = front_to_back.front().width, height = front_to_back.front().height;
-    if (rgb8) {
-        rgb8->width = width;
-        rgb8->height = height;
-        rgb8->rgb.assign(c.host_rgb8.data(), c.host_rgb8.data() + 3 * pixels);
-    }
-    if (rgb) {
-        rgb->width = width;
-        rgb->height = height;
-        rgb->rgb.assign(c.host_rgb.data(), c.host_rgb.data() + 3 * pixels);
-    }
+    c.copy_out(front_to_back.front().width, front_to_back.front().height, rgb, rgb8);
     times.transfer_ms = event_ms(c.marks[Impl::start], c.marks[Impl::transferred]);
     times.merge_ms = event_ms(c.marks[Impl::transferred], c.marks[Impl::merged]);
     times.copy_out_ms = event_ms(c.marks[Impl::merged], c.marks[Impl::copied]);

@@ -169,7 +169,10 @@ FrameStats combine_shard_stats(const ShardedFrameStats& sharded, bool concurrent
     s.window = std::max(s.window, 1);
     s.stage_ms[Stage::merge] += sharded.merge_ms;
     s.stage_ms[Stage::copy_out] += sharded.transfer_ms + sharded.copy_out_ms;
-    s.total_ms = sharded.total_ms;
+    double shards_ms = 0;
+    for (const FrameStats& part : sharded.shards)
+        shards_ms = concurrent ? std::max(shards_ms, part.total_ms) : shards_ms + part.total_ms;
+    s.total_ms = shards_ms + sharded.transfer_ms + sharded.merge_ms + sharded.copy_out_ms;
     return s;
 }
 

@@ -132,7 +132,8 @@ public:
         nlohmann::json shards = nlohmann::json::array();
         for (const catgs::FrameStats& part : last_.shards)
             shards.push_back({{"total_ms", part.total_ms}, {"pairs", part.pairs}, {"visible", part.visible}});
-        return {{"shard_render_ms", last_.render_ms},
+        return {{"shard_wall_ms", last_.total_ms},
+                {"shard_render_ms", last_.render_ms},
                 {"shard_transfer_ms", last_.transfer_ms},
                 {"shard_merge_ms", last_.merge_ms},
                 {"shard_copy_out_ms", last_.copy_out_ms},

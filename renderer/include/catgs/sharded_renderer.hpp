@@ -56,7 +56,9 @@ struct ShardedFrameStats {
 /// A sharded frame as one frame's stats: the shards' counts summed, a key frame if any shard's
 /// was, each stage's time summed over the shards when they render in turn or the slowest
 /// shard's when they render at once (`concurrent`); the composite's time added to merge, the
-/// transfer between GPUs and the final image's copy to copy_out; total is the frame's wall time.
+/// transfer between GPUs and the final image's copy to copy_out. total_ms is measured as an
+/// unsharded frame's is (on a GPU: CUDA events, not the host's wall clock): the shards' totals
+/// (summed, or the slowest) plus the composite's; `sharded.total_ms` is the wall time.
 FrameStats combine_shard_stats(const ShardedFrameStats& sharded, bool concurrent);
 
 class ShardedRenderer {
