@@ -7,6 +7,7 @@
 #include <string>
 
 #include "catgs/error.hpp"
+#include "catgs/parallel.hpp"
 #include "catgs/shard_plan.hpp"
 #include "composite.cuh"
 #include "cuda_check.hpp"
@@ -88,8 +89,7 @@ struct DeviceCompositor::Impl {
 };
 
 /// The finished image to the caller, in bands of rows: each band's copy to pinned memory is
-/// enqueued at once, and the host takes band b into the caller's image while the later bands
-/// are still on their way (the host's copy out of pinned memory is the slower of the two).
+/// enqueued at once, and host threads take each band into the caller's image as it lands.
 void DeviceCompositor::Impl::copy_out(int width, int height, ImageF* rgb, ImageRGB8* rgb8) {
     Impl& c = *this;
     const std::size_t row = 3 * static_cast<std::size_t>(width);
@@ -118,14 +118,19 @@ void DeviceCompositor::Impl::copy_out(int width, int height, ImageF* rgb, ImageR
         rgb->height = height;
         rgb->rgb.resize(values);
     }
-    for (int band = 0; band * rows_per_band < height; ++band) {
-        CATGS_CUDA_CHECK(cudaEventSynchronize(c.band_copied[static_cast<std::size_t>(band)]));
-        const std::size_t first = row * static_cast<std::size_t>(band * rows_per_band);
-        const std::size_t count =
-            row * static_cast<std::size_t>(std::min(rows_per_band, height - band * rows_per_band));
-        if (rgb8) std::copy_n(c.host_rgb8.data() + first, count, rgb8->rgb.data() + first);
-        if (rgb) std::copy_n(c.host_rgb.data() + first, count, rgb->rgb.data() + first);
-    }
+    // One host thread a band: a single thread's copy out of pinned memory (measured 3 ms for a
+    // 4K frame's 25 MB on the H200 host) took six times the device's copy across PCIe.
+    const int bands = (height + rows_per_band - 1) / rows_per_band;
+    parallel_for(static_cast<std::size_t>(bands), 1, bands, [&](std::size_t band_begin, std::size_t band_end) {
+        for (std::size_t band = band_begin; band < band_end; ++band) {
+            CATGS_CUDA_CHECK(cudaEventSynchronize(c.band_copied[band]));
+            const int first_row = static_cast<int>(band) * rows_per_band;
+            const std::size_t first = row * static_cast<std::size_t>(first_row);
+            const std::size_t count = row * static_cast<std::size_t>(std::min(rows_per_band, height - first_row));
+            if (rgb8) std::copy_n(c.host_rgb8.data() + first, count, rgb8->rgb.data() + first);
+            if (rgb) std::copy_n(c.host_rgb.data() + first, count, rgb->rgb.data() + first);
+        }
+    });
     CATGS_CUDA_CHECK(cudaEventSynchronize(c.marks[Impl::copied]));
 }
 
