@@ -29,6 +29,9 @@ TEST(CliOptions, ReuseOrderDefaultReadsAsAPersonWritesIt) {
     EXPECT_DOUBLE_EQ(options.catgs.reuse_order_max_angle,
                      *catgs::parse_degrees(flags.reuse_order_max_deg) * catgs::kPi / 180.0);
     EXPECT_NEAR(options.catgs.reuse_order_max_angle, catgs::kDefaultReuseOrderMaxAngle, 1e-12);
+    // Benchmark tables and logs describe it the same way.
+    const std::string described = catgs::cli::describe_pipeline(options);
+    EXPECT_NE(described.find("depth order reused within 0.0000573 deg (1e-6 rad)"), std::string::npos) << described;
 
     // Other values show the same way; "any" as itself.
     for (const auto& [value, shown] : {std::pair{"180", "TEXT=180 (3.14 rad)"},

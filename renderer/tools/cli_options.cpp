@@ -42,8 +42,9 @@ std::string PipelineFlags::angle_name(double radians) {
 namespace {
 
 /// --help's default of --reuse-order-max-deg as a person reads it: "0.0000573 (1e-6 rad)"
-/// rather than the flag's value text, 5.72958e-05, which stays what is parsed.
-std::string readable_degrees(const std::string& flag_value) {
+/// rather than the flag's value text, 5.72958e-05, which stays what is parsed; `unit` goes
+/// after the degrees ("0.0000573 deg (1e-6 rad)").
+std::string readable_degrees(const std::string& flag_value, const std::string& unit = "") {
     const std::optional<double> degrees = parse_degrees(flag_value);
     if (!degrees || !(*degrees > 0)) return flag_value;
     // Three significant digits in positional notation, trailing zeros dropped.
@@ -59,7 +60,7 @@ std::string readable_degrees(const std::string& flag_value) {
     std::string radians = text;
     for (const char* padded : {"e-0", "e+0"})
         if (const auto at = radians.find(padded); at != std::string::npos) radians.erase(at + 2, 1);
-    return shown + " (" + radians + " rad)";
+    return shown + unit + " (" + radians + " rad)";
 }
 
 }  // namespace
@@ -165,7 +166,8 @@ std::string describe_pipeline(const RenderOptions& o) {
         s += std::string(" by ") + window_cost_name(c.window_cost);
     if (c.cache != CacheMode::off && !c.resort_cached)
         s += std::isfinite(c.reuse_order_max_angle)
-                 ? ", depth order reused within " + PipelineFlags::angle_name(c.reuse_order_max_angle) + " deg"
+                 ? ", depth order reused within " +
+                       readable_degrees(PipelineFlags::angle_name(c.reuse_order_max_angle), " deg")
                  : ", depth order reused";
     if (!o.chunk_culling) s += ", no chunk culling";
     return s;
