@@ -55,19 +55,7 @@ inline void write_file(const std::string& path, const std::string& bytes) {
     ASSERT_TRUE(out.good()) << path;
 }
 
-/// Runs f and returns the catgs::Error message; fails the test on no exception or another type.
-inline std::string error_of(const std::function<void()>& f) {
-    try {
-        f();
-    } catch (const catgs::Error& e) {
-        return e.what();
-    } catch (const std::exception& e) {
-        ADD_FAILURE() << "expected catgs::Error, got another exception: " << e.what();
-        return "";
-    }
-    ADD_FAILURE() << "expected catgs::Error, nothing was thrown";
-    return "";
-}
+using test::error_of;
 
 /// The message names the file, is one line, and contains every part.
 inline void expect_error(const std::function<void()>& f, const std::string& path,

@@ -100,15 +100,7 @@ Scene chunked_scene(const char* label) {
     return scene;
 }
 
-template <typename F>
-std::string error_of(F&& f) {
-    try {
-        f();
-    } catch (const Error& e) {
-        return e.what();
-    }
-    return "(no error)";
-}
+using test::error_of;
 
 // The compositor gets every shard's partial once, in the frame's visibility order, and its
 // image is the host composite's bit for bit; its times and device reach the frame's stats.

@@ -400,15 +400,7 @@ public:
     std::string name() const override { return "test/none"; }
 };
 
-template <typename F>
-std::string error_of(F&& f) {
-    try {
-        f();
-    } catch (const Error& e) {
-        return e.what();
-    }
-    return "(no error)";
-}
+using test::error_of;
 
 TEST(ShardedRenderer, BadInputIsNamed) {
     const Scene scene = chunked_random_scene(test::fresh_seed("shard bad input"), 3000);

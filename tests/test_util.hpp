@@ -2,17 +2,37 @@
 // to reproduce a failure) and random scenes in front of a camera.
 #pragma once
 
+#include <gtest/gtest.h>
+
 #include <cmath>
 #include <cstdint>
 #include <cstdlib>
+#include <exception>
+#include <functional>
 #include <iostream>
 #include <random>
 #include <string>
 
 #include "catgs/camera.hpp"
+#include "catgs/error.hpp"
 #include "catgs/scene.hpp"
 
 namespace catgs::test {
+
+/// Runs f and returns the catgs::Error message; fails the test on no exception or another type
+/// (bad-input tests assert the message).
+inline std::string error_of(const std::function<void()>& f) {
+    try {
+        f();
+    } catch (const Error& e) {
+        return e.what();
+    } catch (const std::exception& e) {
+        ADD_FAILURE() << "expected catgs::Error, got another exception: " << e.what();
+        return "";
+    }
+    ADD_FAILURE() << "expected catgs::Error, nothing was thrown";
+    return "";
+}
 
 /// Folder of the shared test data: $CATGS_SHARED_DIR when set (GPU hosts get a carried
 /// copy), else ../shared beside the checkout (compile-time CATGS_SHARED_DIR).

@@ -37,15 +37,7 @@ protected:
     }
 };
 
-template <typename F>
-std::string error_of(F&& f) {
-    try {
-        f();
-    } catch (const Error& e) {
-        return e.what();
-    }
-    return "(no error)";
-}
+using test::error_of;
 
 Scene chunked_random_scene(const char* label, std::size_t count) {
     test::RandomSceneParams p;
