@@ -130,6 +130,7 @@ TEST(ShardComposite, CompositorGetsThePartialsInVisibilityOrder) {
         EXPECT_EQ(stats.copy_out_ms, 0.125);
         EXPECT_EQ(stats.peer_direct, 3);
         EXPECT_EQ(stats.peer_staged, 1);
+        EXPECT_EQ(stats.devices, (std::vector<int>{0, 1, 2, 3}));
         ImageRGB8 eight;
         device.render_rgb8(camera, options, eight);
         EXPECT_EQ(eight.rgb, to_rgb8(expected).rgb);
@@ -196,6 +197,13 @@ TEST(ShardComposite, CombinedStatsSumInTurnAndTakeTheSlowestAtOnce) {
     // the slowest, and the composite's 0.875.
     EXPECT_DOUBLE_EQ(in_turn.total_ms, 4.0625 + 2.5625 + 0.875);
     EXPECT_DOUBLE_EQ(at_once.total_ms, 4.0625 + 0.875);
+    // Shards at once on separate GPUs: their spans are the devices'. Two sharing a GPU overlap
+    // there, so the frame counts its wall time.
+    sharded.devices = {0, 1};
+    EXPECT_DOUBLE_EQ(combine_shard_stats(sharded, true).total_ms, 4.0625 + 0.875);
+    sharded.devices = {1, 1};
+    EXPECT_DOUBLE_EQ(combine_shard_stats(sharded, true).total_ms, 9.0);
+    EXPECT_DOUBLE_EQ(combine_shard_stats(sharded, false).total_ms, 4.0625 + 2.5625 + 0.875);
 }
 
 TEST(ShardComposite, BadRequestsAreNamed) {

@@ -131,6 +131,7 @@ ShardedFrameStats ShardedRenderer::render_frame(const Camera& camera, const Rend
         stats.composited_on = compositor_->device();
         stats.peer_direct = t.peer_direct;
         stats.peer_staged = t.peer_staged;
+        for (const DevicePartialImage& p : device_partials_) stats.devices.push_back(p.device);
     } else {
         std::vector<const PartialImage*> ordered;
         for (int s : stats.order) ordered.push_back(&partials_[static_cast<std::size_t>(s)]);
@@ -173,6 +174,10 @@ FrameStats combine_shard_stats(const ShardedFrameStats& sharded, bool concurrent
     for (const FrameStats& part : sharded.shards)
         shards_ms = concurrent ? std::max(shards_ms, part.total_ms) : shards_ms + part.total_ms;
     s.total_ms = shards_ms + sharded.transfer_ms + sharded.merge_ms + sharded.copy_out_ms;
+    std::vector<int> devices = sharded.devices;
+    std::sort(devices.begin(), devices.end());
+    if (concurrent && std::adjacent_find(devices.begin(), devices.end()) != devices.end())
+        s.total_ms = sharded.total_ms;
     return s;
 }
 

@@ -50,7 +50,9 @@ struct ShardedFrameStats {
     int composited_on = -1;  ///< the compositing device; -1: the host
     int peer_direct = 0;     ///< partials copied device to device (peers: NVLink or PCIe)
     int peer_staged = 0;     ///< partials the driver staged through host memory
-    double total_ms = 0;     ///< wall time of the whole frame
+    /// Per shard, the GPU its partial was drawn on (composited on a GPU); empty on the host.
+    std::vector<int> devices;
+    double total_ms = 0;  ///< wall time of the whole frame
 };
 
 /// A sharded frame as one frame's stats: the shards' counts summed, a key frame if any shard's
@@ -58,7 +60,10 @@ struct ShardedFrameStats {
 /// shard's when they render at once (`concurrent`); the composite's time added to merge, the
 /// transfer between GPUs and the final image's copy to copy_out. total_ms is measured as an
 /// unsharded frame's is (on a GPU: CUDA events, not the host's wall clock): the shards' totals
-/// (summed, or the slowest) plus the composite's; `sharded.total_ms` is the wall time.
+/// (summed, or the slowest) plus the composite's. Except where shards rendering at once share
+/// a GPU (`sharded.devices`): their event spans then overlap on it, so no sum or maximum of
+/// them is the device's time, and total_ms is the frame's wall time (`sharded.total_ms`, which
+/// also holds the host's part), an upper bound.
 FrameStats combine_shard_stats(const ShardedFrameStats& sharded, bool concurrent);
 
 class ShardedRenderer {
