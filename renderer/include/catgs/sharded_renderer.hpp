@@ -68,7 +68,7 @@ FrameStats combine_shard_stats(const ShardedFrameStats& sharded, bool concurrent
 
 class ShardedRenderer {
 public:
-    /// Makes the renderer of shard `index` (on the CPU a CPU renderer each; one per GPU later).
+    /// Makes the renderer of shard `index` (a CPU renderer each, or a CUDA renderer on the shard's device).
     using RendererFactory = std::function<std::unique_ptr<Renderer>(int index)>;
 
     /// Plans `shards` shards of `scene` (plan_shards, whose errors it throws) and gives each
