@@ -113,6 +113,18 @@ private:
 };
 #endif
 
+/// Throws catgs::Error unless `backend` is "cuda", built in, with a usable device: naming an
+/// unknown backend, one not built into this binary, or why no device is usable.
+void require_cuda_backend(const std::string& backend) {
+    if (backend != "cuda") throw Error("unknown backend '" + backend + "' (available: " + available_backends() + ")");
+#if CATGS_HAVE_CUDA
+    std::string reason;
+    if (!cuda::device_available(&reason)) throw Error("backend 'cuda': no usable CUDA device (" + reason + ")");
+#else
+    throw Error("backend 'cuda' is not built into this binary (available: " + available_backends() + ")");
+#endif
+}
+
 }  // namespace
 
 FrameStats Renderer::render_rgb8(const Camera& camera, const RenderOptions& options, ImageRGB8& out,
@@ -157,34 +169,26 @@ std::unique_ptr<Renderer> make_renderer(const std::string& backend, Precision pr
         if (precision == Precision::double_) return std::make_unique<CpuBackend<double>>(threads);
         return std::make_unique<CpuBackend<float>>(threads);
     }
-    if (backend == "cuda") {
+    require_cuda_backend(backend);
 #if CATGS_HAVE_CUDA
-        std::string reason;
-        if (!cuda::device_available(&reason)) throw Error("backend 'cuda': no usable CUDA device (" + reason + ")");
-        if (precision == Precision::double_) return std::make_unique<CudaBackend<double>>(device);
-        return std::make_unique<CudaBackend<float>>(device);
+    if (precision == Precision::double_) return std::make_unique<CudaBackend<double>>(device);
+    return std::make_unique<CudaBackend<float>>(device);
 #else
-        (void)device;
-        throw Error("backend 'cuda' is not built into this binary (available: " + available_backends() + ")");
+    (void)device;
+    return nullptr;  // not reached: require_cuda_backend threw
 #endif
-    }
-    throw Error("unknown backend '" + backend + "' (available: " + available_backends() + ")");
 }
 
 std::unique_ptr<PartialCompositor> make_partial_compositor(const std::string& backend, int device) {
     if (backend == "cpu")
         throw Error("backend 'cpu' has no device compositor: its shards composite on the host (composite_partials)");
-    if (backend == "cuda") {
+    require_cuda_backend(backend);
 #if CATGS_HAVE_CUDA
-        std::string reason;
-        if (!cuda::device_available(&reason)) throw Error("backend 'cuda': no usable CUDA device (" + reason + ")");
-        return std::make_unique<cuda::DeviceCompositor>(device);
+    return std::make_unique<cuda::DeviceCompositor>(device);
 #else
-        (void)device;
-        throw Error("backend 'cuda' is not built into this binary (available: " + available_backends() + ")");
+    (void)device;
+    return nullptr;  // not reached: require_cuda_backend threw
 #endif
-    }
-    throw Error("unknown backend '" + backend + "' (available: " + available_backends() + ")");
 }
 
 }  // namespace catgs
