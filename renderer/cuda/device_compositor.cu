@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <map>
 #include <string>
+#include <utility>
 
 #include "catgs/error.hpp"
 #include "catgs/parallel.hpp"
@@ -91,22 +92,26 @@ struct DeviceCompositor::Impl {
 /// The finished image to the caller, in bands of rows: each band's copy to pinned memory is
 /// enqueued at once, and host threads take each band into the caller's image as it lands.
 void DeviceCompositor::Impl::copy_out(int width, int height, ImageF* rgb, ImageRGB8* rgb8) {
-    Impl& c = *this;
     const std::size_t row = 3 * static_cast<std::size_t>(width);
     const int rows_per_band = (height + kCopyBands - 1) / kCopyBands;
-    for (int band = 0; band * rows_per_band < height; ++band) {
-        const std::size_t first = row * static_cast<std::size_t>(band * rows_per_band);
-        const std::size_t count =
-            row * static_cast<std::size_t>(std::min(rows_per_band, height - band * rows_per_band));
+    const int bands = (height + rows_per_band - 1) / rows_per_band;
+    // Band b's first value and its count of values.
+    auto span = [&](int band) {
+        const int first_row = band * rows_per_band;
+        return std::pair{row * static_cast<std::size_t>(first_row),
+                         row * static_cast<std::size_t>(std::min(rows_per_band, height - first_row))};
+    };
+    for (int band = 0; band < bands; ++band) {
+        const auto [first, count] = span(band);
         if (rgb8)
-            CATGS_CUDA_CHECK(cudaMemcpyAsync(c.host_rgb8.data() + first, c.image_rgb8.data() + first, count,
-                                             cudaMemcpyDeviceToHost, c.stream));
+            CATGS_CUDA_CHECK(cudaMemcpyAsync(host_rgb8.data() + first, image_rgb8.data() + first, count,
+                                             cudaMemcpyDeviceToHost, stream));
         if (rgb)
-            CATGS_CUDA_CHECK(cudaMemcpyAsync(c.host_rgb.data() + first, c.image_rgb.data() + first,
-                                             count * sizeof(float), cudaMemcpyDeviceToHost, c.stream));
-        CATGS_CUDA_CHECK(cudaEventRecord(c.band_copied[static_cast<std::size_t>(band)], c.stream));
+            CATGS_CUDA_CHECK(cudaMemcpyAsync(host_rgb.data() + first, image_rgb.data() + first, count * sizeof(float),
+                                             cudaMemcpyDeviceToHost, stream));
+        CATGS_CUDA_CHECK(cudaEventRecord(band_copied[static_cast<std::size_t>(band)], stream));
     }
-    CATGS_CUDA_CHECK(cudaEventRecord(c.marks[Impl::copied], c.stream));
+    CATGS_CUDA_CHECK(cudaEventRecord(marks[copied], stream));
     const std::size_t values = row * static_cast<std::size_t>(height);
     if (rgb8) {
         rgb8->width = width;
@@ -120,18 +125,15 @@ void DeviceCompositor::Impl::copy_out(int width, int height, ImageF* rgb, ImageR
     }
     // One host thread a band: a single thread's copy out of pinned memory (measured 3 ms for a
     // 4K frame's 25 MB on the H200 host) took six times the device's copy across PCIe.
-    const int bands = (height + rows_per_band - 1) / rows_per_band;
     parallel_for(static_cast<std::size_t>(bands), 1, bands, [&](std::size_t band_begin, std::size_t band_end) {
         for (std::size_t band = band_begin; band < band_end; ++band) {
-            CATGS_CUDA_CHECK(cudaEventSynchronize(c.band_copied[band]));
-            const int first_row = static_cast<int>(band) * rows_per_band;
-            const std::size_t first = row * static_cast<std::size_t>(first_row);
-            const std::size_t count = row * static_cast<std::size_t>(std::min(rows_per_band, height - first_row));
-            if (rgb8) std::copy_n(c.host_rgb8.data() + first, count, rgb8->rgb.data() + first);
-            if (rgb) std::copy_n(c.host_rgb.data() + first, count, rgb->rgb.data() + first);
+            CATGS_CUDA_CHECK(cudaEventSynchronize(band_copied[band]));
+            const auto [first, count] = span(static_cast<int>(band));
+            if (rgb8) std::copy_n(host_rgb8.data() + first, count, rgb8->rgb.data() + first);
+            if (rgb) std::copy_n(host_rgb.data() + first, count, rgb->rgb.data() + first);
         }
     });
-    CATGS_CUDA_CHECK(cudaEventSynchronize(c.marks[Impl::copied]));
+    CATGS_CUDA_CHECK(cudaEventSynchronize(marks[copied]));
 }
 
 DeviceCompositor::DeviceCompositor(int device) : impl_(std::make_unique<Impl>(device)) {
