@@ -63,8 +63,10 @@ std::unique_ptr<ShardedRenderer> make_sharded_renderer(const ShardFlags& f, cons
 
 std::string describe_sharding(const ShardFlags& f, const ShardedRenderer& sharded, const std::string& backend) {
     std::string text = sharded.name();
-    if (backend == "cuda")
-        text += " on device" + std::string(f.devices == "1" ? " " : "s ") + join(shard_devices(f, backend));
+    if (backend == "cuda") {
+        const std::vector<int> devices = shard_devices(f, backend);
+        text += (devices.size() == 1 ? " on device " : " on devices ") + join(devices);
+    }
     text += sharded.compositor_device() >= 0 ? ", composited on device " + std::to_string(sharded.compositor_device())
                                              : ", composited on the host";
     return text;
