@@ -12,6 +12,7 @@
 #include <cctype>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <fstream>
 #include <iostream>
 #include <nlohmann/json.hpp>
@@ -19,6 +20,7 @@
 
 #include "catgs/common/command_line.hpp"
 #include "catgs/error.hpp"
+#include "catgs/gpu_queues.hpp"
 #include "catgs/renderer.hpp"
 #include "catgs/scene_io.hpp"
 #include "catgs/scene_ops.hpp"
@@ -315,6 +317,13 @@ void print_summary(const Options& o, const std::vector<Result>& results) {
     }
 }
 
+// The CUDA hardware queues the run had (gpu_queues.hpp), for the record: empty means the
+// driver's default of 8.
+std::string env_or_empty(const char* name) {
+    const char* value = std::getenv(name);
+    return value ? value : "";
+}
+
 int run(const Options& o) {
     const catgs::Precision precision = catgs::parse_precision(o.precision);
     const auto [grid_x, grid_y] = catgs::parse_grid(o.grid);
@@ -369,6 +378,7 @@ int run(const Options& o) {
                            {"grid", o.grid},
                            {"trajectory", o.trajectory},
                            {"renderer", renderer_name},
+                           {"cuda_device_max_connections", env_or_empty("CUDA_DEVICE_MAX_CONNECTIONS")},
                            {"shards", o.sharding.shards},
                            {"width", cameras[0].intrinsics.width},
                            {"height", cameras[0].intrinsics.height},
@@ -386,6 +396,7 @@ int run(const Options& o) {
 }  // namespace
 
 int main(int argc, char** argv) {
+    catgs::request_gpu_hardware_queues();
     Options o;
     CLI::App app{"catgs-bench: per-stage timings of a renderer along a camera path, and time against error"};
     catgs::cli::add_scene_flags(app, o.scene, o.spz_axes);

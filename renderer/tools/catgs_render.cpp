@@ -12,6 +12,7 @@
 
 #include "catgs/common/command_line.hpp"
 #include "catgs/error.hpp"
+#include "catgs/gpu_queues.hpp"
 #include "catgs/renderer.hpp"
 #include "catgs/scene_io.hpp"
 #include "catgs/scene_ops.hpp"
@@ -232,6 +233,7 @@ int run(const Options& o) {
 }  // namespace
 
 int main(int argc, char** argv) {
+    catgs::request_gpu_hardware_queues();
     Options o;
     CLI::App app{"catgs-render: render a 3D Gaussian Splatting scene along a camera path"};
     catgs::cli::add_scene_flags(app, o.scene, o.spz_axes);

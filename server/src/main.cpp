@@ -14,6 +14,7 @@
 #include "catgs/common/exit_codes.hpp"
 #include "catgs/common/files.hpp"
 #include "catgs/error.hpp"
+#include "catgs/gpu_queues.hpp"
 #include "catgs/renderer.hpp"
 #include "catgs/server/device_placement.hpp"
 #include "catgs/server/encoder.hpp"
@@ -171,6 +172,7 @@ void finish_options(CommandLine& c) {
 }  // namespace
 
 int main(int argc, char** argv) {
+    catgs::request_gpu_hardware_queues();
     CommandLine c;
     c.o.backend = "";
     CLI::App app{"catgs-server: streams rendered 3D Gaussian Splatting frames over gRPC (catgs.v1)"};
