@@ -7,6 +7,7 @@
 #include <limits>
 #include <thread>
 
+#include "catgs/error.hpp"
 #include "catgs/server/stream_session.hpp"
 
 namespace catgs::server {
@@ -119,9 +120,10 @@ std::unique_ptr<Renderer> ServerCore::make_session_renderer(int device) const {
     return make_renderer(options_.backend, parse_precision(options_.precision), options_.render_threads, device);
 }
 
-std::unique_ptr<Renderer> ServerCore::acquire_unary_renderer(const std::shared_ptr<const Scene>& scene,
-                                                             const DevicePlacement::Seat& seat) {
+std::unique_ptr<Renderer> ServerCore::acquire_renderer(const std::shared_ptr<const Scene>& scene,
+                                                       const DevicePlacement::Seat& seat) {
     std::unique_ptr<Renderer> renderer;
+    bool holds_another_scene = false;  // taken from the pool, still showing its former scene
     {
         std::lock_guard lock(pool_mutex_);
         // Of the seat's device: one already showing this scene (no upload), else any idle one.
@@ -139,15 +141,28 @@ std::unique_ptr<Renderer> ServerCore::acquire_unary_renderer(const std::shared_p
                 renderer->reset_cache();
                 return renderer;
             }
+            holds_another_scene = true;
         }
     }
     if (!renderer) renderer = make_session_renderer(seat.device());
-    renderer->set_scene(scene);
+    try {
+        renderer->set_scene(scene);
+    } catch (const OutOfMemoryError&) {
+        // Idle renderers hold their scenes and arenas on the device: they yield to a session,
+        // and so does the one taken from the pool (it still holds its former scene).
+        const bool dropped = drop_pooled_if([&](const PooledRenderer& p) { return p.slot == seat.slot(); });
+        if (!dropped && !holds_another_scene) throw;
+        renderer.reset();
+        spdlog::info("device {}: idle pooled renderers let go of their memory for scene {}", seat.device(),
+                     seat.scene_id());
+        renderer = make_session_renderer(seat.device());
+        renderer->set_scene(scene);
+    }
     return renderer;
 }
 
-void ServerCore::release_unary_renderer(std::unique_ptr<Renderer> renderer, const std::shared_ptr<const Scene>& scene,
-                                        const DevicePlacement::Seat& seat) {
+void ServerCore::release_renderer(std::unique_ptr<Renderer> renderer, const std::shared_ptr<const Scene>& scene,
+                                  const DevicePlacement::Seat& seat) {
     const std::string& scene_id = seat.scene_id();
     if (!renderer) return;
     std::unique_ptr<Renderer> surplus;  // destroyed outside the lock
@@ -164,11 +179,12 @@ void ServerCore::release_unary_renderer(std::unique_ptr<Renderer> renderer, cons
     pool_.push_back({scene, scene_id, seat.slot(), std::move(renderer)});
 }
 
-void ServerCore::drop_pooled(const Scene* scene) {
+template <typename Predicate>
+bool ServerCore::drop_pooled_if(Predicate&& drop) {
     std::vector<PooledRenderer> dropped;  // destroyed outside the lock
     std::lock_guard lock(pool_mutex_);
     for (auto it = pool_.begin(); it != pool_.end();) {
-        if (it->scene.get() == scene) {
+        if (drop(*it)) {
             placement_.release_pooled(it->slot, it->scene_id);
             dropped.push_back(std::move(*it));
             it = pool_.erase(it);
@@ -176,6 +192,11 @@ void ServerCore::drop_pooled(const Scene* scene) {
             ++it;
         }
     }
+    return !dropped.empty();
+}
+
+void ServerCore::drop_pooled(const Scene* scene) {
+    drop_pooled_if([scene](const PooledRenderer& p) { return p.scene.get() == scene; });
 }
 
 // The watchdog: a stream whose frame has sat in gRPC's hands longer than the stall timeout

@@ -71,13 +71,13 @@ grpc::ServerUnaryReactor* RenderServiceImpl::Render(grpc::CallbackServerContext*
         FrameStats stats;
         const std::uint64_t max_bytes = core.options().limits.max_session_bytes;
         const std::optional<RenderFailure> failure = catch_render_failure([&] {
-            // Renderers are pooled across unary calls (making one is slow on CUDA).
-            auto renderer = core.acquire_unary_renderer(job->lease->scene(), *job->seat);
+            // Renderers are pooled across calls and sessions (making one is slow on CUDA).
+            auto renderer = core.acquire_renderer(job->lease->scene(), *job->seat);
             stats = renderer->render_rgb8(job->frame.camera, job->setup.options, job->image);
             job->seat->record_render(stats.total_ms);
             // Over the memory limit: the renderer's grow-only arenas are not kept.
             if (max_bytes == 0 || stats.arena_bytes <= max_bytes)
-                core.release_unary_renderer(std::move(renderer), job->lease->scene(), *job->seat);
+                core.release_renderer(std::move(renderer), job->lease->scene(), *job->seat);
         });
         if (failure) {
             if (failure->out_of_memory) core.counters().out_of_memory++;

@@ -59,6 +59,10 @@ StreamSession::~StreamSession() {
     // Every buffered frame is gone with the session; keep the server-wide gauges exact.
     core_.counters().frames_buffered -= buffered_frames_;
     core_.counters().bytes_buffered -= buffered_bytes_;
+    // No task uses the renderer any more. Pooled while the seat and lease still hold the scene,
+    // unless a frame failed or outgrew the session memory limit (the arenas only grow).
+    if (renderer_ && renderer_reusable_ && seat_ && lease_)
+        core_.release_renderer(std::move(renderer_), lease_->scene(), *seat_);
 }
 
 void StreamSession::start() {

@@ -18,8 +18,9 @@ bool same_pose(const Pose& a, const Pose& b) {
 void StreamSession::initialise() {
     std::unique_ptr<Renderer> renderer;
     const std::optional<RenderFailure> failure = catch_render_failure([&] {
-        renderer = core_.make_session_renderer(seat_->device());
-        renderer->set_scene(lease_->scene());  // CUDA: uploads the scene unless another session did
+        // An idle pooled renderer when there is one; else a new one (CUDA: it uploads the
+        // scene unless another session or pooled renderer holds it on the device).
+        renderer = core_.acquire_renderer(lease_->scene(), *seat_);
     });
     Actions actions;
     {
@@ -97,6 +98,7 @@ void StreamSession::render(PendingPose pose) {
         render_busy_ = false;
         render_ms_sum_ += ms_between(begin, rendered);
         if (failure || over_limit) {
+            renderer_reusable_ = false;
             --encoding_;
             drop_unacked_locked(pose.frame.sequence);
             const std::string size = image_size(setup_.intrinsics);

@@ -107,6 +107,7 @@ TEST(ServerLimits, SessionMemoryLimit) {
     o.limits.max_session_bytes = 4'000'000;  // 160x90 needs 1.44 MB, 320x180 5.76 MB
     auto server = start_server(o);
     ASSERT_NO_FATAL_FAILURE(expect_one_frame(channel_to(server->port())));
+    ASSERT_TRUE(eventually([&] { return server->stats().pooled_renderers == 1; }));  // within the limit: kept
     const std::string expected =
         "max-session-memory: rendering scene 'city' at 320x180 needed 5760000 bytes of renderer memory; this server "
         "allows 4000000 per session; lower the resolution";
@@ -120,6 +121,9 @@ TEST(ServerLimits, SessionMemoryLimit) {
         const grpc::Status status = client.close();
         EXPECT_EQ(status.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED) << status.error_message();
         EXPECT_EQ(status.error_message(), expected);
+        // It took the pooled renderer and outgrew the limit: not given back.
+        ASSERT_TRUE(eventually([&] { return server->stats().sessions_active == 0; }));
+        EXPECT_EQ(server->stats().pooled_renderers, 0);
     }
     {
         v1::RenderRequest request =
@@ -262,6 +266,33 @@ TEST(ServerLimits, UnaryRendersReuseRenderers) {
     EXPECT_EQ(ok, 6);
     EXPECT_GE(server->stats().pooled_renderers, 1);
     EXPECT_LE(server->stats().pooled_renderers, 2);
+}
+
+/// A closed stream's renderer waits in the pool, keeping its scene on the device (no second
+/// upload); the next session takes it, its cache reset, and draws the same frame.
+TEST(ServerLimits, StreamSessionsReuseRenderers) {
+    auto device = std::make_shared<FakeDevice>(1'000'000'000, 0);
+    server::ServerOptions o = test_options();
+    o.renderer_factory = device->factory();
+    auto server = start_server(o);
+    const v1::FrameRequest pose = frame_request(1, uav_path(4)[2], 0);
+    std::string first;
+    for (int session = 0; session < 3; ++session) {
+        StreamClient client(channel_to(server->port()));
+        ASSERT_TRUE(client.open(session_config(v1::ENCODING_PNG)));
+        ASSERT_TRUE(client.send(pose));
+        v1::Frame frame;
+        ASSERT_TRUE(client.stream->Read(&frame));
+        ASSERT_FALSE(frame.has_error()) << frame.error().message();
+        if (session == 0) first = frame.data();
+        EXPECT_EQ(frame.data(), first) << "session " << session;
+        EXPECT_EQ(server->stats().pooled_renderers, 0) << "the open session holds the renderer";
+        const std::uint64_t scene_bytes = device->used();
+        EXPECT_GT(scene_bytes, 0u);
+        EXPECT_TRUE(client.close().ok());
+        ASSERT_TRUE(eventually([&] { return server->stats().pooled_renderers == 1; })) << "session " << session;
+        EXPECT_EQ(device->used(), scene_bytes) << "the pooled renderer keeps the one copy of the scene";
+    }
 }
 
 /// A flood of stream calls that never open is bounded: past max_streams() calls alive, a new

@@ -180,7 +180,7 @@ TEST(DevicePlacement, UnloadWhileADeviceHoldsTheScene) {
     Seat on0 = place(core.placement(), "doomed"), on1 = place(core.placement(), "doomed");
     ASSERT_EQ(on1->device(), 1);
     // A unary render on device 1 leaves its renderer pooled there, holding the scene.
-    core.release_unary_renderer(core.acquire_unary_renderer(lease->scene(), *on1), lease->scene(), *on1);
+    core.release_renderer(core.acquire_renderer(lease->scene(), *on1), lease->scene(), *on1);
     on1.reset();
     auto where = core.placement().residency("doomed");
     ASSERT_EQ(where.size(), 2u);
@@ -214,14 +214,14 @@ TEST(DevicePlacement, PooledRenderersStayOnTheirDevice) {
     ASSERT_TRUE(core.scenes().load("city", kTestScene, false, true, nullptr).ok());
     ASSERT_TRUE(core.scenes().acquire("city", &lease).ok());
     Seat on0 = place(core.placement()), on1 = place(core.placement());
-    auto renderer = core.acquire_unary_renderer(lease->scene(), *on0);
+    auto renderer = core.acquire_renderer(lease->scene(), *on0);
     Renderer* made_on0 = renderer.get();
-    core.release_unary_renderer(std::move(renderer), lease->scene(), *on0);
+    core.release_renderer(std::move(renderer), lease->scene(), *on0);
     // Device 1 makes its own; device 0 gets its pooled one back.
-    auto other = core.acquire_unary_renderer(lease->scene(), *on1);
+    auto other = core.acquire_renderer(lease->scene(), *on1);
     EXPECT_NE(other.get(), made_on0);
     EXPECT_EQ(core.stats().pooled_renderers, 1);
-    auto again = core.acquire_unary_renderer(lease->scene(), *on0);
+    auto again = core.acquire_renderer(lease->scene(), *on0);
     EXPECT_EQ(again.get(), made_on0);
     EXPECT_EQ(core.stats().pooled_renderers, 0);
 }
@@ -351,17 +351,20 @@ TEST(MultiDeviceServer, SessionsLandOnDifferentDevicesAndGetSceneShowsThem) {
                   std::string::npos)
             << refused.error_message();
         for (auto& client : clients) EXPECT_TRUE(client->close().ok());
-        EXPECT_TRUE(eventually([&] { return get_scene(channel, "city", &info).ok() && info.devices_size() == 0; }));
+        // The closed sessions' renderers wait in the pool, each keeping the scene on its device.
+        const auto each_device_holds_one_idle = [&] {
+            return get_scene(channel, "city", &info).ok() && info.devices_size() == 2 &&
+                   info.devices(0).pooled_renderers() == 1 && info.devices(1).pooled_renderers() == 1 &&
+                   info.devices(0).sessions() == 0 && info.devices(1).sessions() == 0;
+        };
+        EXPECT_TRUE(eventually(each_device_holds_one_idle));
 
-        // A unary render is placed too; its pooled renderer keeps the scene on its device.
+        // A unary render is placed too; it takes a pooled renderer of its device and gives it back.
         v1::Frame frame;
         ASSERT_TRUE(render_once(channel,
                                 render_request(session_config(v1::ENCODING_JPEG), frame_request(1, path[0], 0)), &frame)
                         .ok());
-        EXPECT_TRUE(eventually([&] {
-            return get_scene(channel, "city", &info).ok() && info.devices_size() == 1 &&
-                   info.devices(0).pooled_renderers() == 1 && info.devices(0).sessions() == 0;
-        }));
+        EXPECT_TRUE(eventually(each_device_holds_one_idle));
     }
     EXPECT_TRUE(log.contains("scene city on device 0"));
     EXPECT_TRUE(log.contains("scene city on device 1"));

@@ -132,16 +132,19 @@ public:
     std::unique_ptr<Renderer> make_session_renderer(int device) const;
     std::unique_ptr<Renderer> make_session_renderer() const { return make_session_renderer(options_.devices.front()); }
 
-    /// Unary renders reuse renderers (on CUDA each holds arenas and a stream, slow to make):
-    /// a renderer of the seat's device showing `scene`, taken from the pool when one of that
-    /// device is idle. Call from a worker.
-    std::unique_ptr<Renderer> acquire_unary_renderer(const std::shared_ptr<const Scene>& scene,
-                                                     const DevicePlacement::Seat& seat);
-    /// Returns a renderer to the pool (at most render_workers are kept), where it keeps the
-    /// scene resident on its device. Call while the caller still holds its scene lease and
-    /// seat: renderers of scenes being unloaded are dropped.
-    void release_unary_renderer(std::unique_ptr<Renderer> renderer, const std::shared_ptr<const Scene>& scene,
-                                const DevicePlacement::Seat& seat);
+    /// Unary renders and stream sessions reuse renderers (on CUDA each holds arenas, streams
+    /// and pinned buffers, slow to make, and the first frames grow the arenas): a renderer of
+    /// the seat's device showing `scene`, taken from the pool when one of that device is idle,
+    /// its inter-frame cache reset. When the scene does not fit on the device, the device's idle
+    /// pooled renderers are dropped and the upload is tried once more. Call from a worker.
+    std::unique_ptr<Renderer> acquire_renderer(const std::shared_ptr<const Scene>& scene,
+                                               const DevicePlacement::Seat& seat);
+    /// Returns a healthy renderer to the pool (at most render_workers are kept), where it keeps
+    /// the scene resident on its device, so that the next session or unary call on that scene
+    /// neither uploads it again nor grows new arenas. Call while the caller still holds its
+    /// scene lease and seat: renderers of scenes being unloaded are dropped.
+    void release_renderer(std::unique_ptr<Renderer> renderer, const std::shared_ptr<const Scene>& scene,
+                          const DevicePlacement::Seat& seat);
 
     /// Registers a new stream call, or refuses it (RESOURCE_EXHAUSTED "max-streams: ...") when
     /// max_streams() calls are alive already.
@@ -168,13 +171,16 @@ public:
 private:
     void watchdog();
     void drop_pooled(const Scene* scene);
+    /// Drops the idle pooled renderers `drop` accepts; true when there were any.
+    template <typename Predicate>
+    bool drop_pooled_if(Predicate&& drop);
 
     // The server's locks, and which may be held while taking which (no other nesting exists;
     // callbacks and destructors that take a lock run after the caller's lock is released):
     //   StreamSession::mutex_ -> Admission's, SceneRegistry's, DevicePlacement's and WorkerPool's
     //                            mutexes (admit, acquire_scene, place and post while handling a
     //                            request);
-    //   pool_mutex_           -> SceneRegistry's mutex (release_unary_renderer checks the scene),
+    //   pool_mutex_           -> SceneRegistry's mutex (release_renderer checks the scene),
     //                            DevicePlacement's (the pool's holds on scenes);
     // and taken alone: streams_mutex_, watchdog_mutex_, Server::mutex_. The SceneRegistry calls
     // its on_freed listener (drop_pooled, which takes pool_mutex_) outside its own lock.

@@ -189,6 +189,7 @@ private:
     // after that); released before the lease and the ticket.
     std::unique_ptr<DevicePlacement::Seat> seat_;
     std::unique_ptr<Renderer> renderer_;  // used by one render task at a time
+    bool renderer_reusable_ = true;       // no frame failed or outgrew the memory limit
 
     std::optional<PendingPose> pending_;  // the newest pose not yet taken by a render task
     std::uint64_t last_request_sequence_ = 0;
