@@ -343,7 +343,6 @@ std::uint64_t CudaRenderer<T>::Impl::count_band(const Frame<T>& f, TileRows rows
     cuda::count_band(CountBandArgs<T>{key_space, g.projected.data(), g.visible.data(), f.view, f.options->culling, rows,
                                       g.touched.data()},
                      stream);
-    cuda::rank_counts(buffers.depth, g.touched.data(), stream);
     const std::uint64_t pairs = scan_ranked_counts(buffers.depth.ranked, true);
     events.record(Event::band_scan, stream);
     events.synchronize(Event::band_scan);

@@ -72,15 +72,13 @@ struct DepthOrderBuffers {
     DeviceArray<std::uint32_t> keys[2];         // depth bits
     DeviceArray<std::uint32_t> slots[2];        // slot indices
     int current = 0;                            // which of keys/slots holds the order
-    DeviceArray<std::uint64_t> ranked_touched;  // pairs of the k-th nearest slot, then a 0
-    DeviceArray<std::uint64_t> ranked_offsets;  // scan of ranked_touched
+    DeviceArray<std::uint64_t> ranked_offsets;  // where the k-th nearest slot's pairs go; the total last
     DeviceArray<std::uint8_t> sort_temp;
 
     const std::uint32_t* order() const { return slots[current].data(); }
     std::size_t bytes() const {
         return with_pairs.bytes() + selected_count.bytes() + select_temp.bytes() + keys[0].bytes() + keys[1].bytes() +
-               slots[0].bytes() + slots[1].bytes() + ranked_touched.bytes() + ranked_offsets.bytes() +
-               sort_temp.bytes();
+               slots[0].bytes() + slots[1].bytes() + ranked_offsets.bytes() + sort_temp.bytes();
     }
 };
 

@@ -145,7 +145,7 @@ struct CudaRenderer<T>::Impl {
     /// `read_total` (cached frames know theirs).
     std::uint64_t scan_ranked_counts(std::uint64_t slots, bool read_total) {
         DepthOrderBuffers& o = buffers.depth;
-        return cuda::scan(ScanArgs{o.ranked_touched.data(), o.ranked_offsets.data(), slots,
+        return cuda::scan(ScanArgs{buffers.gaussians.touched.data(), o.order(), o.ranked_offsets.data(), slots,
                                    &buffers.gaussians.scan_temp, read_total ? host.total.data() : nullptr},
                           stream);
     }

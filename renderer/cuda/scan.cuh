@@ -1,4 +1,5 @@
-// scan: the CUB exclusive sum of the 64-bit tile counts, where each Gaussian's keys go.
+// scan: where each Gaussian's keys go, the CUB exclusive sum of the tile counts of the slots in
+// depth order (depth_order, sort.cuh), gathered as the scan reads them.
 #pragma once
 
 #include <cuda_runtime_api.h>
@@ -10,8 +11,9 @@
 namespace catgs::cuda {
 
 struct ScanArgs {
-    std::uint64_t* counts;   // n + 1 entries, the last 0 (not const: CUB is instantiated as before)
-    std::uint64_t* offsets;  // n + 1 entries: offsets[n] is the total
+    const std::uint64_t* touched;  // per slot: its pairs
+    const std::uint32_t* order;    // n slots, front to back: the k-th count is touched[order[k]]
+    std::uint64_t* offsets;        // n + 1 entries: offsets[n] is the total
     std::uint64_t n;
     DeviceArray<std::uint8_t>* temp;
     std::uint64_t* host_total;  // pinned; null when the total is known (nothing is read back)

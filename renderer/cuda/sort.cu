@@ -28,13 +28,6 @@ __global__ void depth_keys_kernel(std::uint64_t n, const std::uint32_t* with_pai
     slots[k] = slot;
 }
 
-__global__ void rank_counts_kernel(std::uint64_t n, const std::uint32_t* order, const std::uint64_t* touched,
-                                   std::uint64_t* ranked_touched) {
-    const std::uint64_t k = static_cast<std::uint64_t>(blockIdx.x) * blockDim.x + threadIdx.x;
-    if (k < n) ranked_touched[k] = touched[order[k]];
-    if (k == n) ranked_touched[n] = 0;  // the scan's trailing entry holds the total
-}
-
 /// The slots with pairs, in slot order (a stable CUB select), and how many there are (one
 /// read-back: synchronises the stream).
 void select_slots_with_pairs(const DepthOrderArgs& a, cudaStream_t s) {
@@ -80,7 +73,6 @@ std::uint64_t depth_order(const DepthOrderArgs& a, cudaStream_t s) {
         throw Error("cuda renderer: " + std::to_string(a.slots) + " Gaussian slots, more than 32-bit slot ids hold");
     if (!a.reuse_selection) select_slots_with_pairs(a, s);
     const std::uint64_t m = o.ranked;
-    o.ranked_touched.reserve(m + 1, s);
     o.ranked_offsets.reserve(m + 1, s);
     for (int k = 0; k < 2; ++k) {
         o.keys[k].reserve(m, s);
@@ -101,14 +93,7 @@ std::uint64_t depth_order(const DepthOrderArgs& a, cudaStream_t s) {
                                                          static_cast<std::int64_t>(m), 0, 32, s));
         o.current = kb.selector;
     }
-    rank_counts(o, a.touched, s);
     return m;
-}
-
-void rank_counts(DepthOrderBuffers& o, const std::uint64_t* touched, cudaStream_t s) {
-    rank_counts_kernel<<<blocks_for(o.ranked + 1, kThreads), kThreads, 0, s>>>(o.ranked, o.order(), touched,
-                                                                               o.ranked_touched.data());
-    CATGS_CUDA_CHECK_LAUNCH("rank_counts_kernel");
 }
 
 }  // namespace catgs::cuda

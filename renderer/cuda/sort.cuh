@@ -29,7 +29,7 @@ struct DepthOrderArgs {
     std::uint64_t slots;
     const std::uint64_t* touched;  // per slot: its pairs (0: in no list, left out of the order)
     const float* depth;            // per slot: the depth its keys carry
-    DepthOrderBuffers* order;      // out: order.order(), ranked_touched (ranked + 1 entries, the last 0)
+    DepthOrderBuffers* order;      // out: order.order(), order.ranked of them
     /// Keep the previous call's slots with pairs (a cached frame re-sorts its key frame's
     /// lists: same counts), so that nothing is read back.
     bool reuse_selection = false;
@@ -38,13 +38,9 @@ struct DepthOrderArgs {
 
 /// The slots with pairs, front to back (a stable CUB select of them in slot order, whose count
 /// is read back, then a stable CUB radix sort of their depth bits, so equal depths keep slot
-/// order), and their pair counts in that order, ready for the scan. Slots without pairs are
+/// order), ready for the scan of their pair counts in that order. Slots without pairs are
 /// most of a frame's on large scenes, and a sort over them all was 4 passes over every slot.
 /// Returns how many slots the order holds (order.ranked).
 std::uint64_t depth_order(const DepthOrderArgs& args, cudaStream_t stream);
-
-/// ranked_touched from `touched` in the order depth_order left (a band's own counts over the
-/// frame's order: a band's Gaussians are among the frame's).
-void rank_counts(DepthOrderBuffers& order, const std::uint64_t* touched, cudaStream_t stream);
 
 }  // namespace catgs::cuda
