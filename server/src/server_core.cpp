@@ -150,7 +150,7 @@ std::unique_ptr<Renderer> ServerCore::acquire_renderer(const std::shared_ptr<con
     } catch (const OutOfMemoryError&) {
         // Idle renderers hold their scenes and arenas on the device: they yield to a session,
         // and so does the one taken from the pool (it still holds its former scene).
-        const bool dropped = drop_pooled_if([&](const PooledRenderer& p) { return p.slot == seat.slot(); });
+        const bool dropped = drop_idle_renderers(seat);
         if (!dropped && !holds_another_scene) throw;
         renderer.reset();
         spdlog::info("device {}: idle pooled renderers let go of their memory for scene {}", seat.device(),
@@ -193,6 +193,10 @@ bool ServerCore::drop_pooled_if(Predicate&& drop) {
         }
     }
     return !dropped.empty();
+}
+
+bool ServerCore::drop_idle_renderers(const DevicePlacement::Seat& seat) {
+    return drop_pooled_if([&](const PooledRenderer& p) { return p.slot == seat.slot(); });
 }
 
 void ServerCore::drop_pooled(const Scene* scene) {

@@ -80,7 +80,10 @@ grpc::ServerUnaryReactor* RenderServiceImpl::Render(grpc::CallbackServerContext*
                 core.release_renderer(std::move(renderer), job->lease->scene(), *job->seat);
         });
         if (failure) {
-            if (failure->out_of_memory) core.counters().out_of_memory++;
+            if (failure->out_of_memory) {
+                core.counters().out_of_memory++;
+                core.drop_idle_renderers(*job->seat);  // so that a retry finds the memory free
+            }
             reactor->Finish(render_failure_status(*failure, /*size=*/""));
             return;
         }

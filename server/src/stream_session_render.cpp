@@ -91,6 +91,9 @@ void StreamSession::render(PendingPose pose) {
     if (!failure) seat_->record_render(frame_stats.total_ms, rendered);
     const std::uint64_t max_bytes = core_.options().limits.max_session_bytes;
     const bool over_limit = !failure && max_bytes > 0 && frame_stats.arena_bytes > max_bytes;
+    // Idle pooled renderers go too, so that the client's retry finds the memory free (outside
+    // mutex_: destroying renderers frees device memory, which takes a while).
+    if (failure && failure->out_of_memory) core_.drop_idle_renderers(*seat_);
     Actions actions;
     {
         // The renderer is free again: the next pose may render while this one is encoded.

@@ -1,7 +1,8 @@
 // A simulated GPU for the CPU backend (ServerOptions::renderer_factory): renderers that render
 // on the CPU but account "device memory" the way the CUDA backend holds it (one shared copy of
-// each scene, plus per-session arenas proportional to the image) and fail the way it fails
-// when that memory runs out (catgs::OutOfMemoryError naming cudaErrorMemoryAllocation).
+// each scene, plus each renderer's grow-only arenas, proportional to the largest image it drew,
+// held until it is destroyed) and fail the way it fails when that memory runs out
+// (catgs::OutOfMemoryError naming cudaErrorMemoryAllocation).
 #pragma once
 
 #include <functional>
@@ -45,6 +46,21 @@ private:
         }
         ++entry.holders;
     }
+    /// A renderer's arenas grow to `bytes` (never shrink), or it runs out of memory.
+    void grow_arenas(std::uint64_t& held, std::uint64_t bytes) {
+        std::lock_guard lock(mutex_);
+        if (bytes <= held) return;
+        if (used_ + (bytes - held) > capacity_)
+            throw OutOfMemoryError(
+                "CUDA error in cudaMallocAsync(&data_, target, stream) at device_buffer.hpp:39: "
+                "cudaErrorMemoryAllocation: out of memory");
+        used_ += bytes - held;
+        held = bytes;
+    }
+    void free_arenas(std::uint64_t held) {
+        std::lock_guard lock(mutex_);
+        used_ -= held;
+    }
     void release(const Scene* scene) {
         std::lock_guard lock(mutex_);
         auto it = scenes_.find(scene);
@@ -61,6 +77,7 @@ private:
             : device_(std::move(device)), inner_(make_renderer("cpu", Precision::single, 1)) {}
         ~DeviceRenderer() override {
             if (scene_) device_->release(scene_.get());
+            device_->free_arenas(arenas_);
         }
         void set_scene(std::shared_ptr<const Scene> scene) override {
             device_->upload(scene.get(), scene->bytes());
@@ -70,14 +87,16 @@ private:
         }
         FrameStats render(const Camera& camera, const RenderOptions& options, ImageF& out,
                           const FrameHints* hints) override {
+            device_->grow_arenas(arenas_, arena(camera));
             FrameStats stats = inner_->render(camera, options, out, hints);
-            stats.arena_bytes = arena(camera);
+            stats.arena_bytes = arenas_;
             return stats;
         }
         FrameStats render_rgb8(const Camera& camera, const RenderOptions& options, ImageRGB8& out,
                                const FrameHints* hints) override {
+            device_->grow_arenas(arenas_, arena(camera));
             FrameStats stats = inner_->render_rgb8(camera, options, out, hints);
-            stats.arena_bytes = arena(camera);
+            stats.arena_bytes = arenas_;
             return stats;
         }
         void reset_cache() override { inner_->reset_cache(); }
@@ -91,6 +110,7 @@ private:
         std::shared_ptr<FakeDevice> device_;
         std::unique_ptr<Renderer> inner_;
         std::shared_ptr<const Scene> scene_;
+        std::uint64_t arenas_ = 0;  // device bytes of its arenas
     };
 
     struct Uploaded {

@@ -278,6 +278,57 @@ TEST(ServerFaults, DeviceOutOfMemoryWhenASessionLoadsItsScene) {
     ASSERT_TRUE(eventually([&] { return device->used() == 9'440'000u; })) << device->used();  // 40000 Gaussians
 }
 
+/// A frame that runs out of device memory ends its session, as before, and takes the device's
+/// idle pooled renderers with it, so that the client's retry finds their memory free (simulated
+/// with FakeDevice: 100 bytes of arenas a pixel, room for the city and one 320x180 renderer).
+TEST(ServerFaults, IdleRenderersGoWhenAFrameRunsOutOfDeviceMemory) {
+    auto device = std::make_shared<FakeDevice>(/*capacity*/ 11'000'000, /*arena bytes per pixel*/ 100);
+    auto server = start_server([&] {
+        server::ServerOptions o = test_options();
+        o.renderer_factory = device->factory();
+        return o;
+    }());
+    const auto path = uav_path(2);
+    {
+        // Two sessions at 160x90 at once: two renderers (1.44 MB of arenas each), both pooled.
+        StreamClient a(channel_to(server->port())), b(channel_to(server->port()));
+        for (StreamClient* client : {&a, &b}) {
+            ASSERT_TRUE(client->open(session_config(v1::ENCODING_JPEG)));
+            ASSERT_TRUE(client->send(frame_request(1, path[0], 0)));
+        }
+        for (StreamClient* client : {&a, &b}) {
+            v1::Frame frame;
+            ASSERT_TRUE(client->stream->Read(&frame));
+            ASSERT_FALSE(frame.has_error()) << frame.error().message();
+        }
+        EXPECT_TRUE(a.close().ok());
+        EXPECT_TRUE(b.close().ok());
+    }
+    ASSERT_TRUE(eventually([&] { return server->stats().pooled_renderers == 2; }));
+    EXPECT_EQ(device->used(), 4'720'000u + 2 * 1'440'000u);
+    v1::SessionConfig large = session_config(v1::ENCODING_JPEG);
+    large.set_width(320);
+    large.set_height(180);
+    {
+        // 320x180 needs 5.76 MB: the pooled renderer it takes grows past the device.
+        StreamClient client(channel_to(server->port()));
+        ASSERT_TRUE(client.open(large));
+        client.send(frame_request(1, uav_path(2, 320, 180)[0], 0));
+        const grpc::Status status = client.close();
+        EXPECT_EQ(status.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED) << status.error_message();
+        EXPECT_NE(status.error_message().find("out-of-memory"), std::string::npos) << status.error_message();
+        EXPECT_NE(status.error_message().find("cudaErrorMemoryAllocation"), std::string::npos)
+            << status.error_message();
+    }
+    EXPECT_EQ(server->stats().out_of_memory, 1u);
+    // Its renderer (arenas outgrown) and the idle one are gone, and with them the city.
+    ASSERT_TRUE(eventually([&] { return device->used() == 0; })) << device->used();
+    EXPECT_EQ(server->stats().pooled_renderers, 0);
+    // The retry renders: 4.72 MB of scene and 5.76 MB of arenas fit.
+    expect_one_frame(channel_to(server->port()), large);
+    expect_healthy_and_idle(*server);
+}
+
 // ---------------------------------------------------------------------------------------
 // 200 concurrent stream opens against 4 session slots.
 // ---------------------------------------------------------------------------------------

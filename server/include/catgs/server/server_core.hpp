@@ -145,6 +145,10 @@ public:
     /// scene lease and seat: renderers of scenes being unloaded are dropped.
     void release_renderer(std::unique_ptr<Renderer> renderer, const std::shared_ptr<const Scene>& scene,
                           const DevicePlacement::Seat& seat);
+    /// Drops the idle pooled renderers of the seat's device, freeing what they held there (a
+    /// frame ran out of device memory: the client's retry must not find it still taken).
+    /// True when there were any.
+    bool drop_idle_renderers(const DevicePlacement::Seat& seat);
 
     /// Registers a new stream call, or refuses it (RESOURCE_EXHAUSTED "max-streams: ...") when
     /// max_streams() calls are alive already.
