@@ -42,6 +42,7 @@ struct CommandLine {
     std::uint64_t max_scene_mb = 0, max_session_mb = 0;
     std::string token_file, log_level = "info";
     bool no_reflection = false;
+    bool no_prewarm = false;
     std::string jpeg_encoder = "auto";
     catgs::server::EncoderOptions encoder_options;
 };
@@ -64,6 +65,9 @@ void add_serving_options(CLI::App& app, CommandLine& c) {
     app.add_option(
         "--scene", c.scenes,
         "scene to load at start-up, [ID=]PATH|builtin:...; repeatable (default city=" + o.preload[0].substr(5) + ")");
+    app.add_flag("--no-prewarm", c.no_prewarm,
+                 "CUDA: do not upload the start-up scenes to the GPUs before their first session (by default an idle "
+                 "renderer on each GPU holds them there, so the first viewer does not wait for the upload)");
     app.add_option(
         "--backend", o.backend,
         "cpu or cuda (default: cuda when a device is usable, else cpu; built in: " + catgs::available_backends() + ")");
@@ -162,6 +166,7 @@ void finish_options(CommandLine& c) {
     if (o.drain_ms < 0 || o.shutdown_grace_ms < 0) throw catgs::Error("--drain-ms/--shutdown-grace-ms must be >= 0");
     if (!c.token_file.empty()) o.bearer_token = catgs::read_token(c.token_file);
     o.reflection = !c.no_reflection;
+    o.prewarm = !c.no_prewarm;
     if (o.limits.max_sessions < 1) throw catgs::Error("--max-sessions must be >= 1");
     if (o.limits.max_width < 1 || o.limits.max_height < 1) throw catgs::Error("--max-width/--max-height must be >= 1");
     if (!o.bearer_token.empty() && o.tls_cert_file.empty())

@@ -138,6 +138,7 @@ void Server::start() {
         SceneSummary summary;
         grpc::Status status = core_->scenes().load(id, source, false, true, &summary);
         if (!status.ok()) throw Error("--scene '" + spec + "': " + status.error_message());
+        core_->prewarm(summary.id);
     }
 
     render_service_ = std::make_unique<RenderServiceImpl>(*core_);

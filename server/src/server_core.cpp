@@ -195,6 +195,31 @@ bool ServerCore::drop_pooled_if(Predicate&& drop) {
     return !dropped.empty();
 }
 
+void ServerCore::prewarm(const std::string& scene_id) {
+    // The CPU backend shares the host's copy of the scene: nothing to upload (a renderer
+    // factory's renderers, a test's simulated device, may hold device memory).
+    if (!options_.prewarm || (options_.backend == "cpu" && !options_.renderer_factory)) return;
+    std::unique_ptr<SceneRegistry::Lease> lease;
+    if (!acquire_scene(scenes_, scene_id, "prewarm", &lease).ok()) return;
+    // Seats held at once: each goes to another device (the one with the fewest sessions).
+    const std::size_t renderers =
+        std::min(placement_.devices().size(), static_cast<std::size_t>(std::max(1, options_.render_workers)));
+    std::vector<std::unique_ptr<DevicePlacement::Seat>> seats;
+    for (std::size_t i = 0; i < renderers; ++i) {
+        std::unique_ptr<DevicePlacement::Seat> seat;
+        if (!placement_.place(scene_id, &seat).ok()) break;
+        seats.push_back(std::move(seat));
+    }
+    for (const auto& seat : seats) {
+        try {
+            release_renderer(acquire_renderer(lease->scene(), *seat), lease->scene(), *seat);
+        } catch (const std::exception& e) {
+            spdlog::warn("scene {} not made resident on device {} before its first session: {}", scene_id,
+                         seat->device(), e.what());
+        }
+    }
+}
+
 bool ServerCore::drop_idle_renderers(const DevicePlacement::Seat& seat) {
     return drop_pooled_if([&](const PooledRenderer& p) { return p.slot == seat.slot(); });
 }

@@ -44,6 +44,7 @@ inline server::ServerOptions test_options() {
     o.backend = "cpu";
     o.render_threads = 2;
     o.render_workers = 2;
+    o.prewarm = false;  // the tests count pooled renderers and device memory from zero
     o.encode_workers = 2;
     o.shutdown_grace_ms = 2000;
     return o;

@@ -295,6 +295,35 @@ TEST(ServerLimits, StreamSessionsReuseRenderers) {
     }
 }
 
+/// Start-up scenes are on every device before their first session (ServerOptions::prewarm): an
+/// idle renderer on each holds the scene; the first session takes one and uploads nothing.
+TEST(ServerLimits, StartUpScenesAreResidentBeforeTheFirstSession) {
+    auto device = std::make_shared<FakeDevice>(1'000'000'000, 0);
+    server::ServerOptions o = test_options();
+    o.renderer_factory = device->factory();
+    o.devices = {0, 1};
+    o.prewarm = true;
+    auto server = start_server(o);
+    const std::vector<server::DevicePlacement::SceneOnDevice> resident = server->core().placement().residency("city");
+    ASSERT_EQ(resident.size(), 2u);
+    for (const auto& d : resident) {
+        EXPECT_EQ(d.pooled_renderers, 1) << "device " << d.device;
+        EXPECT_EQ(d.sessions, 0) << "device " << d.device;
+    }
+    const std::uint64_t scene_bytes = device->used();
+    EXPECT_GT(scene_bytes, 0u);
+    StreamClient client(channel_to(server->port()));
+    ASSERT_TRUE(client.open(session_config(v1::ENCODING_JPEG)));
+    ASSERT_TRUE(client.send(frame_request(1, uav_path(2)[0], 0)));
+    v1::Frame frame;
+    ASSERT_TRUE(client.stream->Read(&frame));
+    EXPECT_FALSE(frame.has_error()) << frame.error().message();
+    EXPECT_EQ(server->stats().pooled_renderers, 1) << "the session took one of the two";
+    EXPECT_EQ(device->used(), scene_bytes) << "nothing uploaded again";
+    EXPECT_TRUE(client.close().ok());
+    EXPECT_TRUE(eventually([&] { return server->stats().pooled_renderers == 2; }));
+}
+
 /// A flood of stream calls that never open is bounded: past max_streams() calls alive, a new
 /// call ends at once with RESOURCE_EXHAUSTED naming the limit; once the idle calls end, a
 /// stream opens and renders again.
