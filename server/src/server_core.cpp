@@ -212,7 +212,11 @@ void ServerCore::prewarm(const std::string& scene_id) {
     }
     for (const auto& seat : seats) {
         try {
-            release_renderer(acquire_renderer(lease->scene(), *seat), lease->scene(), *seat);
+            // A new renderer, not a pooled one: that would let go of the scene it holds (another
+            // start-up scene's).
+            std::unique_ptr<Renderer> renderer = make_session_renderer(seat->device());
+            renderer->set_scene(lease->scene());
+            release_renderer(std::move(renderer), lease->scene(), *seat);
         } catch (const std::exception& e) {
             spdlog::warn("scene {} not made resident on device {} before its first session: {}", scene_id,
                          seat->device(), e.what());

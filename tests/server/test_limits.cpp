@@ -296,19 +296,24 @@ TEST(ServerLimits, StreamSessionsReuseRenderers) {
 }
 
 /// Start-up scenes are on every device before their first session (ServerOptions::prewarm): an
-/// idle renderer on each holds the scene; the first session takes one and uploads nothing.
+/// idle renderer on each holds each scene; the first session takes one and uploads nothing.
 TEST(ServerLimits, StartUpScenesAreResidentBeforeTheFirstSession) {
     auto device = std::make_shared<FakeDevice>(1'000'000'000, 0);
     server::ServerOptions o = test_options();
     o.renderer_factory = device->factory();
     o.devices = {0, 1};
+    o.render_workers = 4;  // the pool keeps at most 4 idle renderers: two scenes on two devices
+    o.preload.push_back("small=builtin:city?gaussians=10000&seed=3");
     o.prewarm = true;
     auto server = start_server(o);
-    const std::vector<server::DevicePlacement::SceneOnDevice> resident = server->core().placement().residency("city");
-    ASSERT_EQ(resident.size(), 2u);
-    for (const auto& d : resident) {
-        EXPECT_EQ(d.pooled_renderers, 1) << "device " << d.device;
-        EXPECT_EQ(d.sessions, 0) << "device " << d.device;
+    for (const std::string scene : {"city", "small"}) {
+        const std::vector<server::DevicePlacement::SceneOnDevice> resident =
+            server->core().placement().residency(scene);
+        ASSERT_EQ(resident.size(), 2u) << scene;
+        for (const auto& d : resident) {
+            EXPECT_EQ(d.pooled_renderers, 1) << scene << " on device " << d.device;
+            EXPECT_EQ(d.sessions, 0) << scene << " on device " << d.device;
+        }
     }
     const std::uint64_t scene_bytes = device->used();
     EXPECT_GT(scene_bytes, 0u);
@@ -318,10 +323,10 @@ TEST(ServerLimits, StartUpScenesAreResidentBeforeTheFirstSession) {
     v1::Frame frame;
     ASSERT_TRUE(client.stream->Read(&frame));
     EXPECT_FALSE(frame.has_error()) << frame.error().message();
-    EXPECT_EQ(server->stats().pooled_renderers, 1) << "the session took one of the two";
+    EXPECT_EQ(server->stats().pooled_renderers, 3) << "the session took one of the four";
     EXPECT_EQ(device->used(), scene_bytes) << "nothing uploaded again";
     EXPECT_TRUE(client.close().ok());
-    EXPECT_TRUE(eventually([&] { return server->stats().pooled_renderers == 2; }));
+    EXPECT_TRUE(eventually([&] { return server->stats().pooled_renderers == 4; }));
 }
 
 /// A flood of stream calls that never open is bounded: past max_streams() calls alive, a new
