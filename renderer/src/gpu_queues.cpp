@@ -5,10 +5,9 @@
 namespace catgs {
 
 std::string request_gpu_hardware_queues() {
-    constexpr const char* kVariable = "CUDA_DEVICE_MAX_CONNECTIONS";
-    if (const char* set = std::getenv(kVariable); set != nullptr && *set != '\0') return set;
+    if (const char* set = std::getenv(kGpuHardwareQueuesVariable); set != nullptr && *set != '\0') return set;
     const std::string value = std::to_string(kGpuHardwareQueues);
-    setenv(kVariable, value.c_str(), /*overwrite=*/1);  // unset or empty, checked above
+    setenv(kGpuHardwareQueuesVariable, value.c_str(), /*overwrite=*/1);  // unset or empty, checked above
     return value;
 }
 

@@ -378,7 +378,7 @@ int run(const Options& o) {
                            {"grid", o.grid},
                            {"trajectory", o.trajectory},
                            {"renderer", renderer_name},
-                           {"cuda_device_max_connections", env_or_empty("CUDA_DEVICE_MAX_CONNECTIONS")},
+                           {"cuda_device_max_connections", env_or_empty(catgs::kGpuHardwareQueuesVariable)},
                            {"shards", o.sharding.shards},
                            {"width", cameras[0].intrinsics.width},
                            {"height", cameras[0].intrinsics.height},

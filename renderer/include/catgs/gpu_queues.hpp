@@ -17,6 +17,8 @@ namespace catgs {
 
 /// The driver's maximum, enough for every stream of a renderer (17) on a queue of its own.
 inline constexpr int kGpuHardwareQueues = 32;
+/// The environment variable the CUDA driver reads them from.
+inline constexpr const char* kGpuHardwareQueuesVariable = "CUDA_DEVICE_MAX_CONNECTIONS";
 
 /// Sets CUDA_DEVICE_MAX_CONNECTIONS to kGpuHardwareQueues unless the environment already sets
 /// it, and returns the value in effect. Call it first in main(): the driver reads the variable
