@@ -14,13 +14,20 @@ namespace {
 
 // Preprocess waits on its loads (scene, SH) more than it computes, so it runs faster with more
 // warps resident, and registers bound how many (94 a thread in float: 16 warps an SM).
-// - The single-frame kernel is held to 80 registers, 3 blocks of 256 an SM, without spilling:
-//   preprocess 15-19% faster on the bench kit's paths (H200, session 9).
+// - The single-frame kernel is held to 80 registers, 6 blocks of 128 an SM, without spilling:
+//   preprocess 15-19% faster on the bench kit's paths than at ptxas' own choice (H200,
+//   session 9, then in blocks of 256). Blocks of 128 hold as many warps as 3 of 256 did, but a
+//   block waits at its closing count for fewer footprints' tile counts, and a finished block
+//   frees its slot sooner: preprocess 8-13% faster on all six of the kit's paths than in blocks
+//   of 256 (city_ring 1080p 0.557 -> 0.511 ms, garden survey 4K 0.706 -> 0.623; blocks of 64
+//   were within 3% of 128 either way; H200, session 21, plain, 120 frames, twice each).
 // - The kernel that also summarises for the planner would spill at 80, so it runs in blocks
 //   of 128 threads instead: 5 of them fit where 2 of 256 did (20 warps instead of 16).
 // The double kernels only serve tests and keep the defaults.
 template <typename T>
-constexpr int kSingleMinBlocks = sizeof(T) == 4 ? 3 : 1;
+constexpr int kSingleThreads = sizeof(T) == 4 ? 128 : kThreads;
+template <typename T>
+constexpr int kSingleMinBlocks = sizeof(T) == 4 ? 6 : 1;
 constexpr int kSummarizeThreads = 128;
 
 // The SH colour of a Gaussian that touches a tile. At degree 3 its 48 coefficients (192 bytes,
@@ -167,7 +174,7 @@ void preprocess(const PreprocessArgs<T>& a, cudaStream_t s) {
             a.projected, a.touched, a.sort_depth, a.counters);
     };
     if (a.window == 1 && !a.summarize)
-        launch(preprocess_kernel<T, 1, false, kThreads, kSingleMinBlocks<T>>, kThreads, 1);
+        launch(preprocess_kernel<T, 1, false, kSingleThreads<T>, kSingleMinBlocks<T>>, kSingleThreads<T>, 1);
     else if (a.window == 1)
         launch(preprocess_kernel<T, 1, true, kSummarizeThreads, 1>, kSummarizeThreads, 1);
     else if (a.window <= kUnrolledWindow)
