@@ -234,6 +234,30 @@ TEST(SceneIoLimits, MaxRecordsRefusesLargerFiles) {
                  {"2 records exceed the limit of 1", "(LoadOptions::max_records)"});
 }
 
+// LoadOptions::max_scene_bytes: a memory cap must be charged at the file's own SH degree, which
+// a record count derived from one degree's cost cannot do (degree 3 costs 4.2 times degree 0).
+TEST(SceneIoLimits, MaxSceneBytesChargesTheFilesShDegree) {
+    const std::size_t expected[] = {56, 92, 152, 236};
+    catgs::LoadOptions options;
+    EXPECT_EQ(options.max_scene_bytes, std::numeric_limits<std::uint64_t>::max());
+    for (int degree = 0; degree <= catgs::kMaxShDegree; ++degree) {
+        SCOPED_TRACE(degree);
+        const std::size_t each = catgs::scene_bytes_per_gaussian(degree);
+        EXPECT_EQ(each, expected[degree]);
+        const std::string ply = tmp_path("budget" + std::to_string(degree) + ".ply");
+        write_file(ply, graphdeco_ply(3, degree).bytes());
+        options.max_scene_bytes = 3 * each - 1;
+        expect_error([&] { catgs::read_ply(ply, options); }, ply,
+                     {"3 records of SH degree " + std::to_string(degree) + " at " + std::to_string(each) +
+                          " bytes each exceed the limit of " + std::to_string(3 * each - 1) + " bytes",
+                      "(LoadOptions::max_scene_bytes)"});
+        options.max_scene_bytes = 3 * each;
+        const catgs::Scene s = catgs::read_ply(ply, options);
+        EXPECT_EQ(s.count(), 3u);
+        EXPECT_EQ(s.bytes(), 3 * each);
+    }
+}
+
 TEST(SceneIoBadPly, AsciiMissingExtraAndUnparsableValues) {
     Ply ply = graphdeco_ply(5, 0, "ascii");
     const std::string header = ply.header();

@@ -198,6 +198,15 @@ TEST(SceneIoCompressedPlyBad, HeaderLayout) {
              f.sh_count = "5000000000";
          },
          {"file too short for the header's counts"}},
+        // from_chars leaves 0 on overflow: the count must not read as "no Gaussians".
+        {"vertex_overflow",
+         [](CompressedPly& f) { f.vertex_count = "99999999999999999999"; },
+         {"malformed element line 'element vertex 99999999999999999999': the count '99999999999999999999' is not "
+          "a non-negative 64-bit integer",
+          "header line 23"}},
+        {"vertex_not_a_number",
+         [](CompressedPly& f) { f.vertex_count = "5x"; },
+         {"malformed element line 'element vertex 5x': the count '5x' is not a non-negative 64-bit integer"}},
         // Each element's size fits 64 bits, their sum does not.
         {"sizes_overflow",
          [](CompressedPly& f) {

@@ -82,13 +82,17 @@ struct HandGlb {
                 add_floats(kPrefix + "SH_DEGREE_" + std::to_string(l) + "_COEF_" + std::to_string(c), sh[k], "VEC3", n);
     }
 
-    std::string bytes() const {
+    std::string bytes() const { return bytes_with({attributes}); }
+
+    /// One mesh of one splat primitive per attribute map, all over the same BIN chunk.
+    std::string bytes_with(const std::vector<json>& primitive_attributes) const {
         json g = gltf;
         g["buffers"] = {{{"byteLength", bin.size()}}};
-        g["meshes"] = {{{"primitives",
-                         {{{"attributes", attributes},
-                           {"mode", 0},
-                           {"extensions", {{"KHR_gaussian_splatting", json::object()}}}}}}}};
+        json primitives = json::array();
+        for (const json& a : primitive_attributes)
+            primitives.push_back(
+                {{"attributes", a}, {"mode", 0}, {"extensions", {{"KHR_gaussian_splatting", json::object()}}}});
+        g["meshes"] = {{{"primitives", primitives}}};
         return container(g.dump(), bin);
     }
 
@@ -240,6 +244,43 @@ TEST(SceneIoGlb, LyingCountIsRefusedBeforeAllocating) {
     expect_error(
         [&] { catgs::read_glb(path); }, path,
         {"1000000000 elements at byteOffset 0 run past bufferView 0 or its buffer", "accessor 0 ('POSITION')"});
+}
+
+TEST(SceneIoGlb, PrimitivesWithTheirOwnBytesLoadTogether) {
+    HandGlb glb;
+    glb.splats({1, 2, 3}, {0, 0, 0, 1}, {1, 1, 1}, {1}, {{0, 0, 0}});
+    const json first = glb.attributes;
+    glb.splats({4, 5, 6}, {0, 0, 0, 1}, {1, 1, 1}, {1}, {{0, 0, 0}});
+    const catgs::Scene s = catgs::read_glb(write_glb(glb.bytes_with({first, glb.attributes})), absolute());
+    EXPECT_EQ(s.positions, (std::vector<float>{-1, -2, 3, -4, -5, 6}));
+}
+
+// Primitives' counts add up: naming one accessor from many primitives would declare many
+// times the Gaussians whose bytes the file holds (a 2 MB file asking for 128 GB).
+TEST(SceneIoGlb, PrimitivesSharingAnAccessorAreRefusedBeforeAllocating) {
+    const HandGlb glb = one_gaussian();
+    const std::string path = write_glb(glb.bytes_with(std::vector<json>(1000, glb.attributes)));
+    expect_error([&] { catgs::read_glb(path); }, path,
+                 {"reuses accessor 0 ('POSITION') of mesh 0, primitive 0 (mesh 0, primitive 1)"});
+}
+
+TEST(SceneIoGlb, PrimitivesAliasingTheSameBytesAreRefusedBeforeAllocating) {
+    HandGlb glb = one_gaussian();
+    // Each primitive gets accessors of its own, all viewing the first primitive's bytes.
+    std::vector<json> primitives;
+    const json accessors = glb.gltf["accessors"];
+    for (int p = 0; p < 1000; ++p) {
+        json a = glb.attributes;
+        for (auto& [name, index] : a.items()) index = index.get<std::size_t>() + accessors.size() * p;
+        primitives.push_back(a);
+        if (p > 0)
+            for (const json& accessor : accessors) glb.gltf["accessors"].push_back(accessor);
+    }
+    const std::string path = write_glb(glb.bytes_with(primitives));
+    expect_error([&] { catgs::read_glb(path); }, path,
+                 {"the splat primitives' POSITION elements need more than the 92 bytes the buffers hold: primitives "
+                  "share their bytes",
+                  "(meshes)"});
 }
 
 TEST(SceneIoGlb, MismatchedAttributeCount) {

@@ -392,6 +392,40 @@ TEST(SceneIoSpzBad, TruncatedAndCorruptStreams) {
                                           HasSubstr("more than the header's")));
 }
 
+/// Whether a byte value makes zlib refuse the stream depends on the deflate bits around it and
+/// on zlib's version, so every value is tried rather than one baked in.
+std::string first_zlib_error(std::string bytes, std::size_t at, const std::string& path) {
+    for (int value = 0; value < 256; ++value) {
+        bytes[at] = static_cast<char>(value);
+        write_file(path, bytes);
+        try {
+            read_spz(path);
+        } catch (const Error& e) {
+            if (std::string(e.what()).find("corrupt gzip data: ") != std::string::npos) return e.what();
+        }
+    }
+    return "";
+}
+
+// The offset once came out as the start of the read block minus zlib's unread input, which
+// wraps below zero; it must be where zlib stopped, at or just past the damaged byte.
+TEST(SceneIoSpzBad, CorruptGzipDataNamesItsOffsetInTheFile) {
+    SpzFile file;
+    file.gaussians = asymmetric(1);
+    const std::string whole = gzip(file.payload());
+    constexpr std::size_t kDamaged = 20;
+    const std::string path = tmp_path("corrupt20.spz");
+    const std::string message = first_zlib_error(whole, kDamaged, path);
+    ASSERT_THAT(message, ::testing::StartsWith(path + ": corrupt gzip data: "));
+    const std::string marker = "(byte offset ";
+    ASSERT_THAT(message, HasSubstr(marker));
+    const std::uint64_t offset = std::stoull(message.substr(message.rfind(marker) + marker.size()));
+    EXPECT_LE(offset, whole.size()) << message;
+    // zlib may have pulled a few bytes past the damage into its bit buffer before it decodes.
+    EXPECT_GE(offset, kDamaged) << message;
+    EXPECT_LE(offset, kDamaged + 8) << message;
+}
+
 TEST(SceneIoSpzBad, LyingCounts) {
     SpzFile file;
     file.gaussians = asymmetric(1);
@@ -417,6 +451,11 @@ TEST(SceneIoSpzBad, LyingCounts) {
     const std::string capped_path = write_spz("capped.spz", file);
     expect_error([&] { read_spz(capped_path, capped); }, capped_path,
                  {"3 records exceed the limit of 2", "LoadOptions::max_records"});
+    LoadOptions budget;
+    budget.max_scene_bytes = 2 * scene_bytes_per_gaussian(1);
+    expect_error(
+        [&] { read_spz(capped_path, budget); }, capped_path,
+        {"3 records of SH degree 1 at 92 bytes each exceed the limit of 184 bytes", "LoadOptions::max_scene_bytes"});
 }
 
 /// A small file that inflates to 16 MiB of zeros after a valid 3-Gaussian payload: the reader

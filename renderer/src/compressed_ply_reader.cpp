@@ -94,6 +94,20 @@ std::vector<std::string_view> words_of(std::string_view line) {
     return words;
 }
 
+/// An element line's count, worded as ply_reader words it. from_chars leaves the value 0 on
+/// overflow yet still moves past the digits, so its error code must be checked too, or a huge
+/// count would read as none.
+std::uint64_t parse_count(const std::string& path, std::string_view line, std::string_view text, std::size_t n) {
+    std::uint64_t count = 0;
+    const auto [end, ec] = std::from_chars(text.data(), text.data() + text.size(), count);
+    if (ec != std::errc() || end != text.data() + text.size())
+        fail(path,
+             "malformed element line " + io::quote(line) + ": the count " + io::quote(text) +
+                 " is not a non-negative 64-bit integer",
+             io::at_header_line(n));
+    return count;
+}
+
 std::vector<Element> parse_header(io::FileReader& in) {
     const std::string& path = in.path();
     std::vector<Element> elements;
@@ -119,11 +133,8 @@ std::vector<Element> parse_header(io::FileReader& in) {
                 fail(path, "compressed PLY must be 'format binary_little_endian 1.0', not " + io::quote(line),
                      io::at_header_line(n));
         } else if (words[0] == "element") {
-            std::uint64_t count = 0;
-            if (words.size() != 3 || std::from_chars(words[2].data(), words[2].data() + words[2].size(), count).ptr !=
-                                         words[2].data() + words[2].size())
-                fail(path, "malformed element line " + io::quote(line), io::at_header_line(n));
-            elements.push_back(Element{std::string(words[1]), count, {}, n});
+            if (words.size() != 3) fail(path, "malformed element line " + io::quote(line), io::at_header_line(n));
+            elements.push_back(Element{std::string(words[1]), parse_count(path, line, words[2], n), {}, n});
         } else if (words[0] == "property") {
             if (elements.empty()) fail(path, "property before any element", io::at_header_line(n));
             if (words.size() != 3)
@@ -333,9 +344,7 @@ Scene read_compressed_ply(const std::string& path, const LoadOptions& options, L
     const Layout l = map_layout(path, elements);
     check_counts(in, l);
     const std::uint64_t gaussians = l.vertex->count;
-    if (gaussians > options.max_records)
-        fail(path, std::to_string(gaussians) + " records exceed the limit of " + std::to_string(options.max_records),
-             "LoadOptions::max_records");
+    io::check_limits(path, gaussians, l.sh_degree, options);
     const std::vector<float> bounds = read_bounds(in, l, options.drop_invalid);
 
     // The sh element follows every vertex: a second reader walks it alongside.

@@ -16,6 +16,7 @@
 #include <algorithm>
 #include <cerrno>
 #include <cstring>
+#include <map>
 #include <string>
 #include <vector>
 
@@ -239,7 +240,10 @@ public:
                      " run past bufferView " + std::to_string(a.bufferView) + " or its buffer",
                  where);
         data_ = buffer.data() + view.byteOffset + a.byteOffset;
+        element_bytes_ = element;
     }
+
+    std::uint64_t element_bytes() const { return element_bytes_; }
 
     /// Component c of element i, normalised integers mapped to [0, 1] or [-1, 1].
     double get(std::uint64_t i, int c) const {
@@ -260,7 +264,7 @@ public:
 
 private:
     int type_ = 0;
-    std::uint64_t component_bytes_ = 0, stride_ = 0;
+    std::uint64_t component_bytes_ = 0, stride_ = 0, element_bytes_ = 0;
     const unsigned char* data_ = nullptr;
 };
 
@@ -348,13 +352,26 @@ struct PrimitiveAttributes {
     std::uint64_t count;
 };
 
+/// The primitive that first used each accessor. The Gaussian count is the sum of the
+/// primitives' counts, so primitives sharing an accessor of N elements would make the builder
+/// allocate for N per primitive while the file holds the bytes of only N.
+using AccessorOwners = std::map<int, std::string>;
+
+void claim_accessor(const std::string& path, AccessorOwners& owners, int index, const std::string& name,
+                    const std::string& where) {
+    const auto [owner, fresh] = owners.try_emplace(index, where);
+    if (!fresh && owner->second != where)
+        fail(path, "reuses accessor " + std::to_string(index) + " ('" + name + "') of " + owner->second, where);
+}
+
 PrimitiveAttributes check_attributes(const std::string& path, const tinygltf::Model& model, const SplatPrimitive& splat,
-                                     int sh_degree) {
+                                     int sh_degree, AccessorOwners& owners) {
     PrimitiveAttributes checked{.attributes = {}, .sh_sign = {}, .count = splat.count};
     auto add = [&](const std::string& name, int components) {
         auto it = splat.primitive->attributes.find(name);
         if (it == splat.primitive->attributes.end()) fail(path, "missing attribute " + io::quote(name), splat.where);
         checked.attributes.emplace_back(path, model, it->second, name, components, splat.count);
+        claim_accessor(path, owners, it->second, name, splat.where);
     };
     add("POSITION", 3);
     add(std::string(kPrefix) + "ROTATION", 4);
@@ -366,6 +383,25 @@ PrimitiveAttributes check_attributes(const std::string& path, const tinygltf::Mo
             checked.sh_sign.push_back((c + l) % 2 == 0 ? 1.0 : -1.0);  // (-1)^m, m = c - l
         }
     return checked;
+}
+
+/// Distinct accessors may still view the same bytes, which would multiply the count as a
+/// shared accessor does. Each Gaussian's position needs bytes of its own in any real file, so
+/// the positions together cannot need more bytes than the buffers hold.
+void check_positions_fit(const std::string& path, const tinygltf::Model& model,
+                         const std::vector<PrimitiveAttributes>& checked) {
+    std::uint64_t held = 0, needed = 0;
+    for (const tinygltf::Buffer& buffer : model.buffers) held += buffer.data.size();
+    for (const PrimitiveAttributes& primitive : checked) {
+        // Each term fits the buffers (the accessor was checked), so stopping at the first
+        // excess keeps the sum far from overflowing.
+        needed += primitive.count * primitive.attributes[0].element_bytes();
+        if (needed > held)
+            fail(path,
+                 "the splat primitives' POSITION elements need more than the " + std::to_string(held) +
+                     " bytes the buffers hold: primitives share their bytes",
+                 "meshes");
+    }
 }
 
 void read_primitive(const PrimitiveAttributes& checked, io::SceneBuilder& builder, std::uint64_t first_record) {
@@ -406,11 +442,14 @@ Scene read_glb(const std::string& path, const LoadOptions& options, LoadReport* 
 
     int sh_degree = 0;
     std::uint64_t total = 0;
-    // Every accessor is checked against its buffer before the builder allocates for the
-    // counts they declare: a lying count fails here, not in the allocation.
+    // Every accessor is checked against its buffer, and the primitives against sharing
+    // accessors or bytes, before the builder allocates for the counts they declare: a lying
+    // count fails here, not in the allocation.
     std::vector<PrimitiveAttributes> checked;
+    AccessorOwners owners;
     for (const SplatPrimitive& splat : find_primitives(path, model, sh_degree, total))
-        checked.push_back(check_attributes(path, model, splat, sh_degree));
+        checked.push_back(check_attributes(path, model, splat, sh_degree, owners));
+    check_positions_fit(path, model, checked);
     io::SceneBuilder builder(path, total, sh_degree, kGlbEncoding, glb_field_names(sh_degree), options);
     std::uint64_t done = 0;
     for (const PrimitiveAttributes& primitive : checked) {

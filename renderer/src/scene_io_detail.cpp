@@ -97,6 +97,18 @@ std::string quote(std::string_view text) {
     return out + "'";
 }
 
+void check_limits(const std::string& path, std::uint64_t records, int sh_degree, const LoadOptions& options) {
+    if (records > options.max_records)
+        throw LimitError(path + ": " + std::to_string(records) + " records exceed the limit of " +
+                         std::to_string(options.max_records) + " (LoadOptions::max_records)");
+    const std::uint64_t each = scene_bytes_per_gaussian(sh_degree);
+    // Divided rather than multiplied: the count comes from an untrusted header.
+    if (records > options.max_scene_bytes / each)
+        throw LimitError(path + ": " + std::to_string(records) + " records of SH degree " + std::to_string(sh_degree) +
+                         " at " + std::to_string(each) + " bytes each exceed the limit of " +
+                         std::to_string(options.max_scene_bytes) + " bytes (LoadOptions::max_scene_bytes)");
+}
+
 // ---------------------------------------------------------------------------------------
 
 FileReader::FileReader(const std::string& path) : path_(path) {
@@ -258,9 +270,7 @@ SceneBuilder::SceneBuilder(const std::string& path, std::uint64_t records, int s
     // allocation below exact even where size_t is narrower than the 64-bit count.
     if (records > std::numeric_limits<std::size_t>::max() / (sizeof(float) * kMaxFields + 3 * sizeof(double)))
         fail(path, std::to_string(records) + " records are too many to hold", "");
-    if (records > options.max_records)
-        fail(path, std::to_string(records) + " records exceed the limit of " + std::to_string(options.max_records),
-             "LoadOptions::max_records");
+    check_limits(path, records, sh_degree, options);
     scene_.sh_degree = sh_degree;
     scene_.resize(static_cast<std::size_t>(records));
     world_.resize(3 * static_cast<std::size_t>(records));

@@ -40,6 +40,11 @@ inline bool checked_mul(std::uint64_t a, std::uint64_t b, std::uint64_t& out) {
     return !__builtin_mul_overflow(a, b, &out);
 }
 
+/// Refuses `records` Gaussians of `sh_degree` beyond options.max_records or
+/// options.max_scene_bytes. Readers of compressed formats call it as soon as the header gives
+/// the count and degree, before decompressing; SceneBuilder calls it for every format.
+void check_limits(const std::string& path, std::uint64_t records, int sh_degree, const LoadOptions& options);
+
 // ---------------------------------------------------------------------------------------
 // Chunked reading.
 

@@ -402,9 +402,7 @@ private:
 /// Refuses counts the stored bytes cannot plausibly hold, before any texture is decoded.
 void check_count_against_size(const std::string& path, const SogMeta& m, SogFiles& files, std::uint64_t meta_bytes,
                               const LoadOptions& options) {
-    if (m.count > options.max_records)
-        fail(path, std::to_string(m.count) + " records exceed the limit of " + std::to_string(options.max_records),
-             "LoadOptions::max_records");
+    io::check_limits(path, m.count, m.sh_degree, options);
     std::uint64_t stored = meta_bytes;
     const std::pair<const std::string*, const char*> textures[] = {{&m.means_l, "means.files[0]"},
                                                                    {&m.means_u, "means.files[1]"},

@@ -186,14 +186,20 @@ public:
         return done;
     }
     bool ended() const { return ended_; }
-    std::uint64_t compressed_offset() const { return in_.offset() - z_.avail_in; }
+    /// The reader stays at the start of the block zlib is given (refill consumes it only when
+    /// handing over the next), so zlib's position is that start plus what it has taken.
+    std::uint64_t compressed_offset() const { return in_.offset() + block_ - z_.avail_in; }
 
 private:
     /// Hands zlib the next block of the file; false at its end.
     bool refill() {
         in_.consume(block_);
         block_ = static_cast<std::size_t>(std::min<std::uint64_t>(in_.remaining(), kInputBlockBytes));
-        if (block_ == 0 || !in_.require(block_)) return false;
+        if (block_ == 0 || !in_.require(block_)) {
+            // Nothing was handed over: compressed_offset must not count the block.
+            block_ = 0;
+            return false;
+        }
         z_.next_in = const_cast<Bytef*>(in_.data());
         z_.avail_in = static_cast<uInt>(block_);
         return true;
@@ -389,9 +395,7 @@ void check_count(const std::string& path, const SpzHeader& header, const Layout&
                  std::to_string(codec.header_bytes + layout.end) + " decompressed bytes, more than a " +
                  std::to_string(size) + "-byte " + codec.file + " file can hold (" + codec.bound + ")",
              where);
-    if (header.count > options.max_records)
-        fail(path, std::to_string(header.count) + " records exceed the limit of " + std::to_string(options.max_records),
-             "LoadOptions::max_records");
+    io::check_limits(path, header.count, header.sh_degree, options);
 }
 
 /// Versions 2 and 3: the header and the payload inside one gzip stream.

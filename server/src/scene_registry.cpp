@@ -19,9 +19,36 @@ namespace {
 constexpr std::size_t kMaxSceneIdLength = 128;
 /// Host bytes per Gaussian of a degree-3 scene (position 3, scale 3, rotation 4, opacity 1,
 /// 48 SH floats): the upper bound used to refuse an over-limit load before allocating it.
-constexpr std::uint64_t kMaxBytesPerGaussian = sizeof(float) * (3 + 3 + 4 + 1 + 48);
-/// The least a loaded Gaussian costs: position, scale, rotation, opacity and SH degree 0.
-constexpr std::uint64_t kMinBytesPerGaussian = sizeof(float) * (3 + 3 + 4 + 1 + 3);
+constexpr std::uint64_t kMaxBytesPerGaussian = scene_bytes_per_gaussian(3);
+
+/// An id the client sent, for a message that log lines repeat: control bytes escaped (a
+/// newline would forge a line), and cut short (ids that long are never loaded).
+std::string quoted_id(const std::string& id) {
+    std::string out = "'";
+    for (std::size_t i = 0; i < id.size() && i <= kMaxSceneIdLength; ++i) {
+        const auto byte = static_cast<unsigned char>(id[i]);
+        if (i == kMaxSceneIdLength) {
+            out += "...";
+        } else if (byte < 0x20 || byte == 0x7f) {
+            static constexpr char kHex[] = "0123456789abcdef";
+            out += std::string("\\x") + kHex[byte >> 4] + kHex[byte & 15];
+        } else {
+            out += static_cast<char>(byte);
+        }
+    }
+    return out + "'";
+}
+
+/// A loader's message names the file by the path the server opened; clients get the source
+/// they asked for.
+std::string as_source(std::string message, const std::string& path, const std::string& source) {
+    if (path == source) return message;
+    // Searching on after each replacement: the source may contain the path (a link in the root
+    // back to it), and searching from the start again would never end.
+    for (std::size_t at = 0; (at = message.find(path, at)) != std::string::npos; at += source.size())
+        message.replace(at, path.size(), source);
+    return message;
+}
 
 SceneSummary summarize(const std::string& id, const std::string& source, const Scene& scene) {
     SceneSummary s;
@@ -134,7 +161,7 @@ grpc::Status SceneRegistry::load(const std::string& requested_id, const std::str
                 "scene_id '" + id + "': '.' and '..' are not scene ids (they name directories); choose another id"};
     if (!valid_scene_id(id))
         return {grpc::StatusCode::INVALID_ARGUMENT,
-                "scene_id '" + id + "': expected 1..128 characters of letters, digits, '.', '_' or '-'"};
+                "scene_id " + quoted_id(id) + ": expected 1..128 characters of letters, digits, '.', '_' or '-'"};
     {
         std::lock_guard lock(state_->mutex);
         if (grpc::Status taken = id_taken_locked(id); !taken.ok()) return taken;
@@ -174,20 +201,21 @@ grpc::Status SceneRegistry::load(const std::string& requested_id, const std::str
         LoadOptions options;
         options.drop_invalid = drop_invalid;
         // A compressed file (.spz, SOG, compressed PLY) may declare far more Gaussians than
-        // its size suggests: the readers refuse a count the memory limit cannot hold before
-        // they allocate for it.
-        if (max_scene_bytes_ > 0) options.max_records = max_scene_bytes_ / kMinBytesPerGaussian;
-        scene = std::make_shared<const Scene>(load_scene(path, options));
-    } catch (const Error& e) {
-        // The message names the file by the path the server used; clients get their own.
-        std::string message = e.what();
-        if (path != source) {
-            // Searching on after each replacement: the source may contain the path (a link in
-            // the root back to it), and searching from the start again would never end.
-            for (std::size_t at = 0; (at = message.find(path, at)) != std::string::npos; at += source.size())
-                message.replace(at, path.size(), source);
+        // its size suggests: the readers refuse a count the memory left cannot hold at the
+        // file's SH degree before they allocate for it (at degree 0's cost a degree-3 file
+        // could allocate 4.2 times the limit before the check below measured it).
+        if (max_scene_bytes_ > 0) {
+            std::lock_guard lock(state_->mutex);
+            options.max_scene_bytes = max_scene_bytes_ > state_->bytes ? max_scene_bytes_ - state_->bytes : 0;
         }
-        return {grpc::StatusCode::INVALID_ARGUMENT, "source: " + message};
+        scene = std::make_shared<const Scene>(load_scene(path, options));
+    } catch (const LimitError& e) {
+        // The file may be valid: the memory left refused it, as the checks around the load do.
+        return {grpc::StatusCode::RESOURCE_EXHAUSTED,
+                "max-scene-bytes: loading '" + source + "' would exceed the limit of " +
+                    std::to_string(max_scene_bytes_) + " bytes: " + as_source(e.what(), path, source)};
+    } catch (const Error& e) {
+        return {grpc::StatusCode::INVALID_ARGUMENT, "source: " + as_source(e.what(), path, source)};
     } catch (const std::bad_alloc&) {
         return {grpc::StatusCode::RESOURCE_EXHAUSTED, "source '" + source + "': out of memory while loading"};
     } catch (const std::exception& e) {
@@ -215,7 +243,8 @@ grpc::Status SceneRegistry::load(const std::string& requested_id, const std::str
 grpc::Status SceneRegistry::acquire(const std::string& id, std::unique_ptr<Lease>* out) {
     std::lock_guard lock(state_->mutex);
     auto it = state_->scenes.find(id);
-    if (it == state_->scenes.end()) return {grpc::StatusCode::NOT_FOUND, "scene_id '" + id + "': no such scene"};
+    if (it == state_->scenes.end())
+        return {grpc::StatusCode::NOT_FOUND, "scene_id " + quoted_id(id) + ": no such scene"};
     if (it->second.summary.unloading)
         return {grpc::StatusCode::FAILED_PRECONDITION, "scene_id '" + id + "': the scene is being unloaded"};
     ++it->second.summary.sessions;
@@ -238,7 +267,8 @@ grpc::Status SceneRegistry::unload(const std::string& id, SceneSummary* out, boo
     {
         std::lock_guard lock(state_->mutex);
         auto it = state_->scenes.find(id);
-        if (it == state_->scenes.end()) return {grpc::StatusCode::NOT_FOUND, "scene_id '" + id + "': no such scene"};
+        if (it == state_->scenes.end())
+            return {grpc::StatusCode::NOT_FOUND, "scene_id " + quoted_id(id) + ": no such scene"};
         it->second.summary.unloading = true;
         scene = it->second.scene;
         if (out) *out = it->second.summary;
@@ -276,7 +306,8 @@ grpc::Status SceneRegistry::id_taken_locked(const std::string& id) const {
 grpc::Status SceneRegistry::get(const std::string& id, SceneSummary* out) const {
     std::lock_guard lock(state_->mutex);
     auto it = state_->scenes.find(id);
-    if (it == state_->scenes.end()) return {grpc::StatusCode::NOT_FOUND, "scene_id '" + id + "': no such scene"};
+    if (it == state_->scenes.end())
+        return {grpc::StatusCode::NOT_FOUND, "scene_id " + quoted_id(id) + ": no such scene"};
     *out = it->second.summary;
     return grpc::Status::OK;
 }

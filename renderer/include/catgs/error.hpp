@@ -19,4 +19,11 @@ public:
     using Error::Error;
 };
 
+/// A limit the caller set (LoadOptions::max_records, max_scene_bytes) refused the input,
+/// which may be valid: a server answers RESOURCE_EXHAUSTED, not INVALID_ARGUMENT.
+class LimitError : public Error {
+public:
+    using Error::Error;
+};
+
 }  // namespace catgs

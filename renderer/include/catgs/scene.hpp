@@ -28,6 +28,14 @@ struct Chunk {
     std::uint32_t begin = 0, end = 0;
 };
 
+/// Host bytes one Gaussian takes in a Scene of this SH degree, as Scene::bytes() counts them:
+/// 11 floats of position, scale, rotation and opacity, and 3 per SH coefficient (56, 92, 152
+/// and 236 bytes at degrees 0 to 3). A memory limit must use the file's degree: the least,
+/// degree 0's, lets a degree-3 file allocate 4.2 times the limit before it is measured.
+constexpr std::size_t scene_bytes_per_gaussian(int sh_degree) {
+    return sizeof(float) * (11 + 3 * static_cast<std::size_t>(sh_coefficient_count(sh_degree)));
+}
+
 /// Positions are float offsets from a double-precision origin chosen at load (the centre of
 /// the bounds): a UAV capture in UTM coordinates sits 10^6..10^7 m from the world origin,
 /// where a float has a resolution of 0.06..1 m. Every per-frame computation is relative to

@@ -39,6 +39,12 @@ struct LoadOptions {
     /// for it. The default leaves only the bound the file size sets; fuzz targets and
     /// memory-capped callers lower it.
     std::uint64_t max_records = std::numeric_limits<std::uint64_t>::max();
+    /// A file whose declared records would take more than this many bytes of Scene
+    /// (scene_bytes_per_gaussian at the file's SH degree, what Scene::bytes() of the result
+    /// counts) is refused before anything is allocated for it. Memory-capped callers set it
+    /// rather than deriving max_records from one degree's cost. Loading itself briefly needs
+    /// 24 bytes more per record (the double positions, until the origin is known).
+    std::uint64_t max_scene_bytes = std::numeric_limits<std::uint64_t>::max();
     /// read_spz: the axes of the file's data (see SpzAxes).
     SpzAxes spz_axes = SpzAxes::rdf;
     Progress progress;
