@@ -4,10 +4,13 @@
 #include <google/protobuf/message.h>
 
 #include <cmath>
+#include <cstdio>
 #include <sstream>
+#include <utility>
 #include <vector>
 
 #include "catgs/common/pose_wire.hpp"
+#include "catgs/constants.hpp"
 #include "catgs/error.hpp"
 
 namespace catgs::server {
@@ -30,17 +33,101 @@ bool finite(const v1::Vec3& v) {
 /// Quaternions shorter than this cannot be normalised reliably (and mean a client bug).
 constexpr double kMinQuaternionNorm = 1e-6;
 
+grpc::Status check_position(const v1::Vec3& p, const std::string& field) {
+    if (!finite(p)) return invalid(field, "not finite (" + num(p.x()) + ", " + num(p.y()) + ", " + num(p.z()) + ")");
+    static_assert(kMaxAbsPosition == 1e30, "the message below spells the bound as the loaders do");
+    for (const auto& [axis, value] : {std::pair{"x", p.x()}, std::pair{"y", p.y()}, std::pair{"z", p.z()}})
+        if (std::fabs(value) > kMaxAbsPosition) return invalid(field + "." + axis, num(value) + " is beyond +-1e30");
+    return grpc::Status::OK;
+}
+
 grpc::Status check_pose(const v1::Pose& pose, const std::string& field) {
     if (!pose.has_position()) return invalid(field + ".position", "missing");
-    if (!finite(pose.position()))
-        return invalid(field + ".position", "not finite (" + num(pose.position().x()) + ", " +
-                                                num(pose.position().y()) + ", " + num(pose.position().z()) + ")");
+    if (grpc::Status s = check_position(pose.position(), field + ".position"); !s.ok()) return s;
     if (!pose.has_orientation()) return invalid(field + ".orientation", "missing");
     const auto& q = pose.orientation();
     if (!(std::isfinite(q.w()) && std::isfinite(q.x()) && std::isfinite(q.y()) && std::isfinite(q.z())))
         return invalid(field + ".orientation", "quaternion is not finite");
     const double norm = std::sqrt(q.w() * q.w() + q.x() * q.x() + q.y() * q.y() + q.z() * q.z());
     if (!(norm >= kMinQuaternionNorm)) return invalid(field + ".orientation", "quaternion has zero length");
+    return grpc::Status::OK;
+}
+
+/// The field of view (degrees) that focal length `f` gives across `size` pixels.
+double field_of_view_degrees(double size, double f) {
+    return 2.0 * std::atan(size / (2.0 * f)) * 180.0 / kPi;
+}
+
+std::string field_of_view_range() {
+    std::ostringstream s;  // not "[" + std::string: GCC 12 warns falsely (-Wrestrict) on that
+    s << '[' << kMinFieldOfViewDegrees << ", " << kMaxFieldOfViewDegrees << ']';
+    return s.str();
+}
+
+bool sane_field_of_view(double degrees) {
+    return degrees >= kMinFieldOfViewDegrees && degrees <= kMaxFieldOfViewDegrees;
+}
+
+// A finite positive double can still become a float infinity or zero in the renderers (e.g.
+// fx = 1e300: every Gaussian culled, a blank frame); a sane field of view bounds the focal
+// length well inside float range for every protocol image size.
+grpc::Status check_focal_length(double f, double size, const std::string& field, const char* direction) {
+    if (!(std::isfinite(f) && f > 0)) return invalid(field, num(f) + " is not a positive focal length");
+    const double fov = field_of_view_degrees(size, f);
+    if (!sane_field_of_view(fov))
+        return invalid(field, num(f) + " gives a " + direction + " field of view of " + num(fov) +
+                                  " degrees, outside " + field_of_view_range());
+    return grpc::Status::OK;
+}
+
+grpc::Status parse_intrinsics(const v1::Intrinsics& in, int width, int height, const std::string& prefix,
+                              Intrinsics* out) {
+    const std::string i = prefix + "intrinsics.";
+    if (grpc::Status s = check_focal_length(in.fx(), width, i + "fx", "horizontal"); !s.ok()) return s;
+    if (grpc::Status s = check_focal_length(in.fy(), height, i + "fy", "vertical"); !s.ok()) return s;
+    if (!(std::isfinite(in.cx()) && in.cx() >= 0 && in.cx() <= width))
+        return invalid(i + "cx",
+                       "principal point " + num(in.cx()) + " is outside the image width 0.." + std::to_string(width));
+    if (!(std::isfinite(in.cy()) && in.cy() >= 0 && in.cy() <= height))
+        return invalid(i + "cy",
+                       "principal point " + num(in.cy()) + " is outside the image height 0.." + std::to_string(height));
+    *out = Intrinsics{in.fx(), in.fy(), in.cx(), in.cy(), width, height};
+    return grpc::Status::OK;
+}
+
+grpc::Status parse_field_of_view(const v1::SessionConfig& config, int width, int height, const std::string& prefix,
+                                 Intrinsics* out) {
+    const double fov =
+        config.horizontal_fov_degrees() == 0 ? kDefaultHorizontalFovDegrees : config.horizontal_fov_degrees();
+    if (!sane_field_of_view(fov))
+        return invalid(prefix + "horizontal_fov_degrees", num(fov) + " is outside " + field_of_view_range());
+    *out = intrinsics_from_fov(width, height, fov);
+    return grpc::Status::OK;
+}
+
+// Log lines quote it: a newline or an escape sequence would forge or hide lines.
+grpc::Status check_client_name(const std::string& name, const std::string& field) {
+    if (name.size() > kMaxClientNameLength)
+        return invalid(field, std::to_string(name.size()) + " bytes; at most " + std::to_string(kMaxClientNameLength));
+    for (std::size_t i = 0; i < name.size(); ++i) {
+        const auto byte = static_cast<unsigned char>(name[i]);
+        if (byte < 0x20 || byte == 0x7f) {
+            char hex[8];
+            std::snprintf(hex, sizeof hex, "0x%02x", byte);
+            return invalid(field, std::string("control character ") + hex + " at byte " + std::to_string(i) +
+                                      "; only printable text is accepted");
+        }
+    }
+    return grpc::Status::OK;
+}
+
+// Built from a validated pose the translation is finite (|position| <= 1e30); this guards
+// the renderers should the pose checks and camera_from_pose ever drift apart.
+grpc::Status checked_camera(const v1::Pose& pose, const Intrinsics& intrinsics, std::int64_t client_timestamp_us,
+                            const std::string& field, Camera* out) {
+    *out = camera_from_pose(pose, intrinsics, client_timestamp_us);
+    for (double v : out->pose.translation)
+        if (!std::isfinite(v)) return invalid(field, "the camera's translation is not finite");
     return grpc::Status::OK;
 }
 
@@ -168,31 +255,10 @@ grpc::Status parse_session_config(const v1::SessionConfig& config, const Limits&
                                                           std::to_string(limits.max_height)};
 
     Intrinsics k;
-    if (config.has_intrinsics()) {
-        const auto& in = config.intrinsics();
-        const std::string i = f + "intrinsics.";
-        if (!(std::isfinite(in.fx()) && in.fx() > 0))
-            return invalid(i + "fx", num(in.fx()) + " is not a positive focal length");
-        if (!(std::isfinite(in.fy()) && in.fy() > 0))
-            return invalid(i + "fy", num(in.fy()) + " is not a positive focal length");
-        if (!(std::isfinite(in.cx()) && in.cx() >= 0 && in.cx() <= width))
-            return invalid(i + "cx", "principal point " + num(in.cx()) + " is outside the image width 0.." +
-                                         std::to_string(width));
-        if (!(std::isfinite(in.cy()) && in.cy() >= 0 && in.cy() <= height))
-            return invalid(i + "cy", "principal point " + num(in.cy()) + " is outside the image height 0.." +
-                                         std::to_string(height));
-        k = Intrinsics{in.fx(), in.fy(), in.cx(), in.cy(), width, height};
-    } else {
-        const double fov =
-            config.horizontal_fov_degrees() == 0 ? kDefaultHorizontalFovDegrees : config.horizontal_fov_degrees();
-        if (!(std::isfinite(fov) && fov > 0 && fov < 180))
-            return invalid(f + "horizontal_fov_degrees", num(fov) + " is outside (0, 180)");
-        k = intrinsics_from_fov(width, height, fov);
-        // A field of view within a few hundred ulps of 0 (e.g. 1e-306) makes the focal length
-        // overflow to infinity.
-        if (!std::isfinite(k.fx) || !std::isfinite(k.fy))
-            return invalid(f + "horizontal_fov_degrees", num(fov) + " is too small: the focal length overflows");
-    }
+    if (grpc::Status s = config.has_intrinsics() ? parse_intrinsics(config.intrinsics(), width, height, f, &k)
+                                                 : parse_field_of_view(config, width, height, f, &k);
+        !s.ok())
+        return s;
 
     EncodeSettings e;
     const auto& enc = config.encoding();
@@ -234,9 +300,7 @@ grpc::Status parse_session_config(const v1::SessionConfig& config, const Limits&
         return invalid(pf + "near_plane", num(p.near_plane()) + " is not a non-negative distance");
     if (p.has_reuse_order_max_degrees() && !(p.reuse_order_max_degrees() >= 0 && p.reuse_order_max_degrees() <= 180))
         return invalid(pf + "reuse_order_max_degrees", num(p.reuse_order_max_degrees()) + " is outside 0..180");
-    if (config.client_name().size() > kMaxClientNameLength)
-        return invalid(f + "client_name", std::to_string(config.client_name().size()) + " bytes; at most " +
-                                              std::to_string(kMaxClientNameLength));
+    if (grpc::Status s = check_client_name(config.client_name(), f + "client_name"); !s.ok()) return s;
     if (config.max_unacked_frames() > static_cast<std::uint32_t>(kMaxUnackedFramesLimit))
         return invalid(f + "max_unacked_frames", std::to_string(config.max_unacked_frames()) + " is outside 0..2");
 
@@ -259,44 +323,73 @@ Camera camera_from_pose(const v1::Pose& pose, const Intrinsics& intrinsics, std:
     return camera;
 }
 
-grpc::Status parse_frame_request(const v1::FrameRequest& request, const Intrinsics& intrinsics,
-                                 const std::string& prefix, FrameSetup* out) {
-    if (grpc::Status s = check_enum_values(request, prefix); !s.ok()) return s;
-    const std::string f = prefix + ".";
+grpc::Status check_flight_plan_length(const v1::FrameRequest& request, const std::string& prefix) {
+    if (request.flight_plan_size() > kMaxFlightPlanPoses)
+        return invalid(prefix + ".flight_plan", std::to_string(request.flight_plan_size()) + " poses; at most " +
+                                                    std::to_string(kMaxFlightPlanPoses) + " are used");
+    return grpc::Status::OK;
+}
+
+namespace {
+
+grpc::Status check_frame_fields(const v1::FrameRequest& request, const std::string& f) {
     if (!request.has_pose()) return invalid(f + "pose", "missing");
     if (grpc::Status s = check_pose(request.pose(), f + "pose"); !s.ok()) return s;
     if (request.has_linear_velocity() && !finite(request.linear_velocity()))
         return invalid(f + "linear_velocity", "not finite");
     if (request.has_angular_speed() && !(std::isfinite(request.angular_speed()) && request.angular_speed() >= 0))
         return invalid(f + "angular_speed", num(request.angular_speed()) + " is not a finite non-negative speed");
-    if (request.flight_plan_size() > kMaxFlightPlanPoses)
-        return invalid(f + "flight_plan", std::to_string(request.flight_plan_size()) + " poses; at most " +
-                                              std::to_string(kMaxFlightPlanPoses) + " are used");
     for (int i = 0; i < request.flight_plan_size(); ++i) {
         const std::string pf = f + "flight_plan[" + std::to_string(i) + "].pose";
         if (!request.flight_plan(i).has_pose()) return invalid(pf, "missing");
         if (grpc::Status s = check_pose(request.flight_plan(i).pose(), pf); !s.ok()) return s;
     }
+    return grpc::Status::OK;
+}
+
+grpc::Status frame_cameras(const v1::FrameRequest& request, const Intrinsics& intrinsics, const std::string& f,
+                           FrameSetup* out) {
+    if (grpc::Status s =
+            checked_camera(request.pose(), intrinsics, request.client_timestamp_us(), f + "pose", &out->camera);
+        !s.ok())
+        return s;
+    out->hints.reset();
+    if (!request.has_linear_velocity() && !request.has_angular_speed() && request.flight_plan_size() == 0)
+        return grpc::Status::OK;
+    FrameHints hints;
+    if (request.has_linear_velocity())
+        hints.linear_velocity = {request.linear_velocity().x(), request.linear_velocity().y(),
+                                 request.linear_velocity().z()};
+    if (request.has_angular_speed()) hints.angular_speed = request.angular_speed();
+    for (int i = 0; i < request.flight_plan_size(); ++i) {
+        const v1::TimedPose& planned = request.flight_plan(i);
+        const std::string pf = f + "flight_plan[" + std::to_string(i) + "].pose";
+        if (grpc::Status s = checked_camera(planned.pose(), intrinsics, planned.client_timestamp_us(), pf,
+                                            &hints.plan.emplace_back());
+            !s.ok())
+            return s;
+    }
+    out->hints = std::move(hints);
+    return grpc::Status::OK;
+}
+
+}  // namespace
+
+grpc::Status parse_frame_request(const v1::FrameRequest& request, const Intrinsics& intrinsics,
+                                 const std::string& prefix, FrameSetup* out) {
+    // Before the walk over every element, which a 1 MiB plan of empty poses makes costly.
+    if (grpc::Status s = check_flight_plan_length(request, prefix); !s.ok()) return s;
+    if (grpc::Status s = check_enum_values(request, prefix); !s.ok()) return s;
+    const std::string f = prefix + ".";
+    if (grpc::Status s = check_frame_fields(request, f); !s.ok()) return s;
     out->sequence = request.sequence();
     out->client_timestamp_us = request.client_timestamp_us();
     out->last_received_sequence = request.last_received_sequence();
     try {
-        out->camera = camera_from_pose(request.pose(), intrinsics, request.client_timestamp_us());
-        out->hints.reset();
-        if (request.has_linear_velocity() || request.has_angular_speed() || request.flight_plan_size() > 0) {
-            FrameHints hints;
-            if (request.has_linear_velocity())
-                hints.linear_velocity = {request.linear_velocity().x(), request.linear_velocity().y(),
-                                         request.linear_velocity().z()};
-            if (request.has_angular_speed()) hints.angular_speed = request.angular_speed();
-            for (const auto& planned : request.flight_plan())
-                hints.plan.push_back(camera_from_pose(planned.pose(), intrinsics, planned.client_timestamp_us()));
-            out->hints = std::move(hints);
-        }
+        return frame_cameras(request, intrinsics, f, out);
     } catch (const Error& e) {
         return invalid(f + "pose", e.what());
     }
-    return grpc::Status::OK;
 }
 
 v1::Encoding to_proto(Format format) {

@@ -20,11 +20,20 @@ grpc::ServerUnaryReactor* finish_now(grpc::CallbackServerContext* context, const
     return reactor;
 }
 
+/// Bounds on repeated fields, checked before the enum walk visits each of their elements.
+grpc::Status check_list_lengths(const google::protobuf::Message&) {
+    return grpc::Status::OK;
+}
+grpc::Status check_list_lengths(const v1::RenderRequest& request) {
+    return check_flight_plan_length(request.frame(), "frame");
+}
+
 /// A unary request: the bytes parsed (malformed_request when they are not a `Message`) and
 /// every enum field checked against its descriptor, whatever the method.
 template <typename Message>
 grpc::Status parse_request(const grpc::ByteBuffer& in, Message* out) {
     if (!parse_message(in, out)) return malformed_request(Message::descriptor()->name(), in);
+    if (grpc::Status s = check_list_lengths(*out); !s.ok()) return s;
     return check_enum_values(*out, "");
 }
 

@@ -32,6 +32,14 @@ const char* kind_name(const v1::StreamRequest& r) {
     }
 }
 
+/// The checks of a frame request that need no session state: the flight plan's length first,
+/// so that a long plan is refused before the enum walk visits each of its elements (with the
+/// session's mutex held).
+grpc::Status check_frame_structure(const v1::StreamRequest& request) {
+    if (grpc::Status s = check_flight_plan_length(request.frame(), "frame"); !s.ok()) return s;
+    return check_enum_values(request, "");
+}
+
 }  // namespace
 
 StreamSession::StreamSession(ServerCore& core, grpc::CallbackServerContext* context)
@@ -128,7 +136,7 @@ void StreamSession::OnReadDone(bool ok) {
                     handle_open(request_.open());
             } else {
                 if (request_.has_frame()) {
-                    handle_frame(request_.frame(), check_enum_values(request_, ""));
+                    handle_frame(request_.frame(), check_frame_structure(request_));
                 } else {
                     ++stats_.requests_received;
                     error_frame_locked(0,
@@ -283,7 +291,7 @@ void StreamSession::handle_open(const v1::SessionConfig& config) {
 }
 
 // mutex_ held.
-void StreamSession::handle_frame(const v1::FrameRequest& request, const grpc::Status& enum_values) {
+void StreamSession::handle_frame(const v1::FrameRequest& request, const grpc::Status& structure) {
     ++stats_.requests_received;
     // The acknowledgement counts even when the rest of the request is bad.
     last_ack_ = std::max(last_ack_, request.last_received_sequence());
@@ -297,8 +305,8 @@ void StreamSession::handle_frame(const v1::FrameRequest& request, const grpc::St
         status = {grpc::StatusCode::INVALID_ARGUMENT, "frame.sequence: " + std::to_string(request.sequence()) +
                                                           " is not greater than the previous " +
                                                           std::to_string(last_request_sequence_)};
-    else if (!enum_values.ok())
-        status = enum_values;
+    else if (!structure.ok())
+        status = structure;
     else
         status = parse_frame_request(request, setup_.intrinsics, "frame", &frame);
     if (!status.ok()) {

@@ -35,7 +35,26 @@ protected:
         EXPECT_NE(status.error_message().find(message), std::string::npos)
             << "'" << status.error_message() << "' does not contain '" << message << "'";
     }
+
+    /// A unary Render of `request` fails with INVALID_ARGUMENT and `message` in its text.
+    static void expect_render_fails(const v1::RenderRequest& request, const std::string& message) {
+        v1::Frame frame;
+        const grpc::Status status = render_once(channel_to(server_->port()), request, &frame);
+        EXPECT_EQ(status.error_code(), grpc::StatusCode::INVALID_ARGUMENT) << status.error_message();
+        EXPECT_NE(status.error_message().find(message), std::string::npos)
+            << "'" << status.error_message() << "' does not contain '" << message << "'";
+    }
 };
+
+/// Far out along x and z and turned 45 degrees about y: the camera's translation, a sum of
+/// both coordinates, overflows a double.
+void set_overflowing_pose(v1::Pose* pose) {
+    pose->mutable_position()->set_x(-1.3e308);
+    pose->mutable_position()->set_y(0);
+    pose->mutable_position()->set_z(-1.3e308);
+    auto* q = pose->mutable_orientation();
+    q->set_w(0.92388), q->set_x(0), q->set_y(0.38268), q->set_z(0);
+}
 
 TEST_F(BadRequestTest, StreamWithoutOpeningMessage) {
     StreamClient client(channel_to(server_->port()));
@@ -77,6 +96,11 @@ TEST_F(BadRequestTest, UnknownScene) {
                       "open.scene_id 'atlantis': no such scene");
     expect_open_fails(session_config(v1::ENCODING_JPEG, 0, ""), grpc::StatusCode::INVALID_ARGUMENT,
                       "open.scene_id: empty");
+    // The message reaches the server's log: a newline in the id must not start a line there.
+    expect_open_fails(session_config(v1::ENCODING_JPEG, 0, "x\n[info] forged"), grpc::StatusCode::INVALID_ARGUMENT,
+                      "open.scene_id 'x\\x0a[info] forged': no such scene");
+    expect_open_fails(session_config(v1::ENCODING_JPEG, 0, std::string(200, 'a')), grpc::StatusCode::INVALID_ARGUMENT,
+                      "open.scene_id '" + std::string(128, 'a') + "...': no such scene");
 }
 
 TEST_F(BadRequestTest, IntrinsicsThatDisagreeWithTheResolution) {
@@ -100,6 +124,45 @@ TEST_F(BadRequestTest, IntrinsicsThatDisagreeWithTheResolution) {
     k->set_fy(kNaN);
     expect_open_fails(config, grpc::StatusCode::INVALID_ARGUMENT,
                       "open.intrinsics.fy: nan is not a positive focal length");
+}
+
+/// Focal lengths a double holds but a float does not (the renderers' type) drew blank frames.
+TEST_F(BadRequestTest, FocalLengthsOutsideASaneFieldOfView) {
+    v1::SessionConfig config = session_config(v1::ENCODING_JPEG);
+    auto* k = config.mutable_intrinsics();
+    k->set_cx(kWidth / 2.0);
+    k->set_cy(kHeight / 2.0);
+    k->set_fx(1e300);
+    k->set_fy(1e300);
+    expect_open_fails(config, grpc::StatusCode::INVALID_ARGUMENT,
+                      "open.intrinsics.fx: 1e+300 gives a horizontal field of view of 9.16732e-297 degrees, "
+                      "outside [0.001, 179.9]");
+    expect_render_fails(render_request(config, frame_request(1, uav_path(2)[0], 0)),
+                        "config.intrinsics.fx: 1e+300 gives a horizontal field of view of");
+    k->set_fx(1e-300);
+    expect_open_fails(config, grpc::StatusCode::INVALID_ARGUMENT,
+                      "open.intrinsics.fx: 1e-300 gives a horizontal field of view of 180 degrees, "
+                      "outside [0.001, 179.9]");
+    k->set_fx(100);
+    expect_open_fails(config, grpc::StatusCode::INVALID_ARGUMENT,
+                      "open.intrinsics.fy: 1e+300 gives a vertical field of view of 5.15662e-297 degrees, "
+                      "outside [0.001, 179.9]");
+    k->set_fy(0.01);  // 0.01 pixels over 90 rows: 179.97 degrees
+    expect_open_fails(config, grpc::StatusCode::INVALID_ARGUMENT,
+                      "open.intrinsics.fy: 0.01 gives a vertical field of view of 179.975 degrees, "
+                      "outside [0.001, 179.9]");
+    config = session_config(v1::ENCODING_JPEG);
+    config.set_horizontal_fov_degrees(1e-100);
+    expect_open_fails(config, grpc::StatusCode::INVALID_ARGUMENT,
+                      "open.horizontal_fov_degrees: 1e-100 is outside [0.001, 179.9]");
+    config.set_horizontal_fov_degrees(179.95);
+    expect_open_fails(config, grpc::StatusCode::INVALID_ARGUMENT,
+                      "open.horizontal_fov_degrees: 179.95 is outside [0.001, 179.9]");
+    // The ends of the range render.
+    for (double fov : {server::kMinFieldOfViewDegrees, server::kMaxFieldOfViewDegrees}) {
+        config.set_horizontal_fov_degrees(fov);
+        expect_one_frame(channel_to(server_->port()), config);
+    }
 }
 
 TEST_F(BadRequestTest, BadEncodingAndPipelineOptions) {
@@ -151,6 +214,15 @@ TEST_F(BadRequestTest, BadFrameRequestsAnswerThatFrameAndKeepTheSession) {
              p->mutable_pose()->mutable_position()->set_z(kNaN);
          },
          "frame.flight_plan[0].pose.position: not finite"},
+        {"overflowing position", [](v1::FrameRequest& r) { set_overflowing_pose(r.mutable_pose()); },
+         "frame.pose.position.x: -1.3e+308 is beyond +-1e30"},
+        {"far flight plan",
+         [](v1::FrameRequest& r) {
+             auto* p = r.add_flight_plan();
+             *p->mutable_pose() = r.pose();
+             p->mutable_pose()->mutable_position()->set_z(2e30);
+         },
+         "frame.flight_plan[0].pose.position.z: 2e+30 is beyond +-1e30"},
     };
     std::uint64_t seq = 0, ack = 0;
     for (const Case& c : cases) {
@@ -334,13 +406,62 @@ TEST_F(BadRequestTest, UnknownEnumValuesInAFrameRequestAnswerThatFrame) {
 }
 
 TEST_F(BadRequestTest, UnaryRenderValidatesToo) {
-    v1::RenderRequest request = render_request(session_config(v1::ENCODING_PNG), frame_request(1, uav_path(2)[0], 0));
+    const v1::RenderRequest good =
+        render_request(session_config(v1::ENCODING_PNG), frame_request(1, uav_path(2)[0], 0));
+    v1::RenderRequest request = good;
     request.mutable_frame()->mutable_pose()->mutable_position()->set_x(kInf);
+    expect_render_fails(request, "frame.pose.position: not finite");
+    request = good;
+    set_overflowing_pose(request.mutable_frame()->mutable_pose());
+    expect_render_fails(request, "frame.pose.position.x: -1.3e+308 is beyond +-1e30");
+    request = good;
+    set_overflowing_pose(request.mutable_frame()->add_flight_plan()->mutable_pose());
+    expect_render_fails(request, "frame.flight_plan[0].pose.position.x: -1.3e+308 is beyond +-1e30");
+}
+
+/// A plan of empty poses fills a 1 MiB message with 500k elements: its length is refused
+/// before the enum walk visits each one, so that error comes first even where an enum value
+/// elsewhere in the request is bad too.
+TEST_F(BadRequestTest, LongFlightPlansAreRefusedBeforeTheirElementsAreWalked) {
+    v1::FrameRequest long_plan = frame_request(1, uav_path(2)[0], 0);
+    constexpr int kPoses = 500'000;
+    long_plan.mutable_flight_plan()->Reserve(kPoses);
+    for (int i = 0; i < kPoses; ++i) long_plan.add_flight_plan();
+    const std::string message = "frame.flight_plan: 500000 poses; at most 16 are used";
+
+    v1::RenderRequest request = render_request(session_config(v1::ENCODING_PNG), long_plan);
+    request.mutable_config()->mutable_pipeline()->set_cache(static_cast<v1::CacheMode>(99));
+    expect_render_fails(request, message);
+
+    StreamClient client(channel_to(server_->port()));
+    ASSERT_TRUE(client.open(session_config(v1::ENCODING_JPEG)));
+    ASSERT_TRUE(client.send(long_plan));
     v1::Frame frame;
-    const grpc::Status status = render_once(channel_to(server_->port()), request, &frame);
-    EXPECT_EQ(status.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
-    EXPECT_NE(status.error_message().find("frame.pose.position: not finite"), std::string::npos)
-        << status.error_message();
+    ASSERT_TRUE(client.stream->Read(&frame));
+    ASSERT_TRUE(frame.has_error());
+    EXPECT_EQ(frame.error().code(), static_cast<int>(grpc::StatusCode::INVALID_ARGUMENT));
+    EXPECT_NE(frame.error().message().find(message), std::string::npos) << frame.error().message();
+    ASSERT_TRUE(client.send(frame_request(2, uav_path(2)[1], 0)));
+    ASSERT_TRUE(client.stream->Read(&frame));
+    EXPECT_FALSE(frame.has_error()) << frame.error().message();
+    EXPECT_TRUE(client.close().ok());
+}
+
+/// The server's log lines quote client_name: a newline in it would forge a line, an escape
+/// sequence hide one.
+TEST_F(BadRequestTest, ClientNamesWithControlCharacters) {
+    v1::SessionConfig config = session_config(v1::ENCODING_JPEG);
+    config.set_client_name("viewer 1.2\n2024-01-01 [info] session 7 opened by admin");
+    expect_open_fails(config, grpc::StatusCode::INVALID_ARGUMENT,
+                      "open.client_name: control character 0x0a at byte 10; only printable text is accepted");
+    expect_render_fails(render_request(config, frame_request(1, uav_path(2)[0], 0)),
+                        "config.client_name: control character 0x0a at byte 10");
+    config.set_client_name("\x1b[2Kviewer");
+    expect_open_fails(config, grpc::StatusCode::INVALID_ARGUMENT, "open.client_name: control character 0x1b at byte 0");
+    config.set_client_name(std::string("viewer") + '\x7f');
+    expect_open_fails(config, grpc::StatusCode::INVALID_ARGUMENT, "open.client_name: control character 0x7f at byte 6");
+    config.set_client_name("caméra 3 (étage 2)");  // UTF-8 is text
+    expect_one_frame(channel_to(server_->port()), config);
 }
 
 }  // namespace

@@ -24,8 +24,18 @@ namespace catgs::server {
 inline constexpr std::uint32_t kMaxProtocolDimension = kMaxImageSide;
 /// Flight plans longer than the largest speculation window are of no use to the renderer.
 inline constexpr int kMaxFlightPlanPoses = kMaxWindow;
-/// SessionConfig.client_name goes into log lines: longer names are malformed requests.
+/// SessionConfig.client_name goes into log lines: longer names, and names with control
+/// characters, are malformed requests.
 inline constexpr std::size_t kMaxClientNameLength = 256;
+/// Pose positions further out are malformed: the scene loaders' bound on stored coordinates
+/// (kMaxAbsCoordinate, renderer/src/scene_io_detail.cpp), so no scene reaches that far, and
+/// far enough inside double range that a camera's translation stays finite.
+inline constexpr double kMaxAbsPosition = 1e30;
+/// Fields of view (degrees) the focal lengths or horizontal_fov_degrees may give: a focal
+/// length that a float cannot hold renders a blank frame, and this range keeps it within
+/// about 4e-4..1e9 pixels for every protocol image size.
+inline constexpr double kMinFieldOfViewDegrees = 1e-3;
+inline constexpr double kMaxFieldOfViewDegrees = 179.9;
 /// Server-side defaults for fields left at zero.
 inline constexpr int kDefaultJpegQuality = 85;
 inline constexpr double kDefaultHorizontalFovDegrees = 70.0;
@@ -61,6 +71,10 @@ struct FrameSetup {
     Camera camera;
     std::optional<FrameHints> hints;  ///< set when the request carries velocity or a plan
 };
+
+/// INVALID_ARGUMENT when the flight plan is longer than kMaxFlightPlanPoses. Cheap: callers
+/// run it before check_enum_values, whose walk over every element a long plan makes costly.
+grpc::Status check_flight_plan_length(const v1::FrameRequest& request, const std::string& prefix);
 
 /// Validates a frame request against the session's intrinsics (`prefix`: "frame").
 grpc::Status parse_frame_request(const v1::FrameRequest& request, const Intrinsics& intrinsics,

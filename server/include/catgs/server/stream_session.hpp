@@ -124,8 +124,8 @@ private:
     };
 
     void handle_open(const v1::SessionConfig& config);
-    /// `enum_values`: check_enum_values of the whole StreamRequest.
-    void handle_frame(const v1::FrameRequest& request, const grpc::Status& enum_values);
+    /// `structure`: the flight plan's length, then check_enum_values of the whole StreamRequest.
+    void handle_frame(const v1::FrameRequest& request, const grpc::Status& structure);
     void initialise();              // render pool: make the renderer
     void render_next();             // render pool: render the newest pose
     void render(PendingPose pose);  // render pool: render_next's render and the encode it posts
