@@ -1,4 +1,5 @@
-// request_gpu_hardware_queues (gpu_queues.hpp): 32 queues unless the environment chose.
+// request_gpu_hardware_queues and request_eager_kernel_loading (gpu_queues.hpp): the tools'
+// driver settings unless the environment chose.
 #include <gtest/gtest.h>
 
 #include <cstdlib>
@@ -11,20 +12,21 @@ namespace {
 
 constexpr const char* kVariable = "CUDA_DEVICE_MAX_CONNECTIONS";
 
-// Restores the variable as the test found it.
+// Restores a variable as the test found it.
 class SavedVariable {
 public:
-    SavedVariable() {
-        if (const char* v = std::getenv(kVariable)) saved_ = v;
+    explicit SavedVariable(const char* name = kVariable) : name_(name) {
+        if (const char* v = std::getenv(name_)) saved_ = v;
     }
     ~SavedVariable() {
         if (saved_)
-            setenv(kVariable, saved_->c_str(), 1);
+            setenv(name_, saved_->c_str(), 1);
         else
-            unsetenv(kVariable);
+            unsetenv(name_);
     }
 
 private:
+    const char* name_;
     std::optional<std::string> saved_;
 };
 
@@ -48,6 +50,23 @@ TEST(GpuQueues, TheUsersChoiceIsKept) {
     setenv(kVariable, "4", 1);
     EXPECT_EQ(catgs::request_gpu_hardware_queues(), "4");
     EXPECT_STREQ(std::getenv(kVariable), "4");
+}
+
+TEST(KernelLoading, UnsetOrEmptyBecomesEager) {
+    SavedVariable saved(catgs::kKernelLoadingVariable);
+    unsetenv(catgs::kKernelLoadingVariable);
+    EXPECT_EQ(catgs::request_eager_kernel_loading(), "EAGER");
+    EXPECT_STREQ(std::getenv("CUDA_MODULE_LOADING"), "EAGER");
+    setenv(catgs::kKernelLoadingVariable, "", 1);
+    EXPECT_EQ(catgs::request_eager_kernel_loading(), "EAGER");
+    EXPECT_STREQ(std::getenv("CUDA_MODULE_LOADING"), "EAGER");
+}
+
+TEST(KernelLoading, TheUsersChoiceIsKept) {
+    SavedVariable saved(catgs::kKernelLoadingVariable);
+    setenv(catgs::kKernelLoadingVariable, "LAZY", 1);
+    EXPECT_EQ(catgs::request_eager_kernel_loading(), "LAZY");
+    EXPECT_STREQ(std::getenv("CUDA_MODULE_LOADING"), "LAZY");
 }
 
 }  // namespace

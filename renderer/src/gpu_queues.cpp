@@ -11,4 +11,10 @@ std::string request_gpu_hardware_queues() {
     return value;
 }
 
+std::string request_eager_kernel_loading() {
+    if (const char* set = std::getenv(kKernelLoadingVariable); set != nullptr && *set != '\0') return set;
+    setenv(kKernelLoadingVariable, "EAGER", /*overwrite=*/1);  // unset or empty, checked above
+    return "EAGER";
+}
+
 }  // namespace catgs

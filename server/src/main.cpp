@@ -178,6 +178,7 @@ void finish_options(CommandLine& c) {
 
 int main(int argc, char** argv) {
     catgs::request_gpu_hardware_queues();
+    catgs::request_eager_kernel_loading();
     CommandLine c;
     c.o.backend = "";
     CLI::App app{"catgs-server: streams rendered 3D Gaussian Splatting frames over gRPC (catgs.v1)"};

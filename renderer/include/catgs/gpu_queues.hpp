@@ -25,4 +25,14 @@ inline constexpr const char* kGpuHardwareQueuesVariable = "CUDA_DEVICE_MAX_CONNE
 /// when it creates a device's context, and setenv is not safe once other threads run.
 std::string request_gpu_hardware_queues();
 
+/// The environment variable that tells the CUDA runtime when to load kernels: LAZY (the
+/// default since CUDA 12.2) loads each on its first launch, EAGER all at context creation.
+inline constexpr const char* kKernelLoadingVariable = "CUDA_MODULE_LOADING";
+
+/// Sets CUDA_MODULE_LOADING to EAGER unless the environment already sets it, and returns the
+/// value in effect. For the server: its first session's first frames would otherwise load
+/// each kernel they launch (dozens, with the cache's window and split variants) while a viewer
+/// waits; eagerly they load before it listens. Call it first in main(), as above.
+std::string request_eager_kernel_loading();
+
 }  // namespace catgs
