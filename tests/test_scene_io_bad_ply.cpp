@@ -214,6 +214,34 @@ TEST(SceneIoBadPly, TruncatedElementAfterTheVertices) {
     EXPECT_EQ(catgs::read_ply(none).count(), 2u);
 }
 
+// Data past the last element means the header declared fewer records than the file holds:
+// refused, naming the element and where its data ends, rather than loading part of the scene.
+// ASCII files may still end with blank lines.
+TEST(SceneIoBadPly, DataAfterTheLastElement) {
+    for (const std::string format : {"binary_little_endian", "binary_big_endian"}) {
+        SCOPED_TRACE(format);
+        Ply ply = graphdeco_ply(4, 0, format);
+        const std::string all = ply.bytes();
+        ply.count = "3";  // the fourth record is left over
+        const std::size_t end = all.size() - 17 * 4;
+        expect_ply_error(ply.bytes(), {"68 bytes after the last element 'vertex', which ends at byte " +
+                                           std::to_string(end) + ": the header declares fewer records",
+                                       "byte offset " + std::to_string(end)});
+        Ply face = graphdeco_ply(2, 0, format);
+        face.after_header = "element face 1\nproperty float quality\n";
+        face.after_data = std::string(5, '\0');
+        expect_ply_error(face.bytes(), {"1 bytes after the last element 'face'"});
+    }
+    Ply ascii = graphdeco_ply(3, 0, "ascii");
+    ascii.count = "2";
+    expect_ply_error(ascii.bytes(), {"data after the last element 'vertex'", "the header declares fewer records"});
+    ascii.count = "3";
+    ascii.after_data = "\n  \r\n\t\n";
+    const std::string blank_tail = tmp_path("blank-tail.ply");
+    write_file(blank_tail, ascii.bytes());
+    EXPECT_EQ(catgs::read_ply(blank_tail).count(), 3u);
+}
+
 // LoadOptions::max_records (the fuzz targets' allocation cap): a file that declares more
 // records is refused before anything is allocated for it; the default changes nothing.
 TEST(SceneIoLimits, MaxRecordsRefusesLargerFiles) {

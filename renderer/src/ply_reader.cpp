@@ -48,6 +48,9 @@ struct PlyProperty {
     io::ScalarType count_type = io::ScalarType::kUInt8;
 };
 
+/// How much of an ASCII file's tail is checked at a time for anything but whitespace.
+constexpr std::size_t kAsciiScanBytes = std::size_t{1} << 16;
+
 struct PlyElement {
     std::string name;
     std::uint64_t count = 0;
@@ -505,6 +508,33 @@ void read_ascii_vertices(io::FileReader& in, const PlyElement& vertex, const Ver
     }
 }
 
+/// A header that declares fewer records than the file holds (say 1000 of 2000 vertices) would
+/// otherwise load part of the scene without a word; the compressed PLY reader refuses the same.
+/// An ASCII file may end with blank lines.
+void check_nothing_after(io::FileReader& in, const PlyElement& last, bool ascii) {
+    const std::uint64_t end = in.offset();
+    const std::uint64_t extra = in.remaining();
+    for (std::uint64_t at = end; ascii && in.remaining() > 0;) {
+        const auto n = static_cast<std::size_t>(std::min<std::uint64_t>(in.remaining(), kAsciiScanBytes));
+        if (!in.require(n)) break;
+        const unsigned char* data = in.data();
+        for (std::size_t k = 0; k < n; ++k, ++at) {
+            const unsigned char c = data[k];
+            if (!(c == ' ' || c == '\t' || c == '\r' || c == '\n'))
+                fail(in.path(),
+                     "data after the last element " + io::quote(last.name) +
+                         ": the header declares fewer records than the file holds",
+                     io::at_offset(at));
+        }
+        in.consume(n);
+    }
+    if (!ascii && extra > 0)
+        fail(in.path(),
+             std::to_string(extra) + " bytes after the last element " + io::quote(last.name) + ", which ends at byte " +
+                 std::to_string(end) + ": the header declares fewer records than the file holds",
+             io::at_offset(end));
+}
+
 }  // namespace
 
 Scene read_ply(const std::string& path, const LoadOptions& options, LoadReport* report) {
@@ -534,6 +564,7 @@ Scene read_ply(const std::string& path, const LoadOptions& options, LoadReport* 
     // checked by size when binary records have a fixed size, else walked (lists, ASCII lines).
     for (std::size_t e = header.vertex + 1; e < header.elements.size(); ++e)
         skip_element(in, header.elements[e], ascii, big_endian);
+    check_nothing_after(in, header.elements.back(), ascii);
     Scene scene = builder.finish(report);
     ticker.finish();
     return scene;
