@@ -111,7 +111,7 @@ grpc::Status check_client_name(const std::string& name, const std::string& field
         return invalid(field, std::to_string(name.size()) + " bytes; at most " + std::to_string(kMaxClientNameLength));
     for (std::size_t i = 0; i < name.size(); ++i) {
         const auto byte = static_cast<unsigned char>(name[i]);
-        if (byte < 0x20 || byte == 0x7f) {
+        if (is_control_byte(byte)) {
             char hex[8];
             std::snprintf(hex, sizeof hex, "0x%02x", byte);
             return invalid(field, std::string("control character ") + hex + " at byte " + std::to_string(i) +

@@ -9,6 +9,7 @@
 #include "catgs/builtin_spec.hpp"
 #include "catgs/error.hpp"
 #include "catgs/scene_io.hpp"
+#include "catgs/server/request_validation.hpp"
 
 namespace catgs::server {
 
@@ -29,7 +30,7 @@ std::string quoted_id(const std::string& id) {
         const auto byte = static_cast<unsigned char>(id[i]);
         if (i == kMaxSceneIdLength) {
             out += "...";
-        } else if (byte < 0x20 || byte == 0x7f) {
+        } else if (is_control_byte(byte)) {
             static constexpr char kHex[] = "0123456789abcdef";
             out += std::string("\\x") + kHex[byte >> 4] + kHex[byte & 15];
         } else {
@@ -37,6 +38,10 @@ std::string quoted_id(const std::string& id) {
         }
     }
     return out + "'";
+}
+
+grpc::Status no_such_scene(const std::string& id) {
+    return {grpc::StatusCode::NOT_FOUND, "scene_id " + quoted_id(id) + ": no such scene"};
 }
 
 /// A loader's message names the file by the path the server opened; clients get the source
@@ -243,8 +248,7 @@ grpc::Status SceneRegistry::load(const std::string& requested_id, const std::str
 grpc::Status SceneRegistry::acquire(const std::string& id, std::unique_ptr<Lease>* out) {
     std::lock_guard lock(state_->mutex);
     auto it = state_->scenes.find(id);
-    if (it == state_->scenes.end())
-        return {grpc::StatusCode::NOT_FOUND, "scene_id " + quoted_id(id) + ": no such scene"};
+    if (it == state_->scenes.end()) return no_such_scene(id);
     if (it->second.summary.unloading)
         return {grpc::StatusCode::FAILED_PRECONDITION, "scene_id '" + id + "': the scene is being unloaded"};
     ++it->second.summary.sessions;
@@ -267,8 +271,7 @@ grpc::Status SceneRegistry::unload(const std::string& id, SceneSummary* out, boo
     {
         std::lock_guard lock(state_->mutex);
         auto it = state_->scenes.find(id);
-        if (it == state_->scenes.end())
-            return {grpc::StatusCode::NOT_FOUND, "scene_id " + quoted_id(id) + ": no such scene"};
+        if (it == state_->scenes.end()) return no_such_scene(id);
         it->second.summary.unloading = true;
         scene = it->second.scene;
         if (out) *out = it->second.summary;
@@ -306,8 +309,7 @@ grpc::Status SceneRegistry::id_taken_locked(const std::string& id) const {
 grpc::Status SceneRegistry::get(const std::string& id, SceneSummary* out) const {
     std::lock_guard lock(state_->mutex);
     auto it = state_->scenes.find(id);
-    if (it == state_->scenes.end())
-        return {grpc::StatusCode::NOT_FOUND, "scene_id " + quoted_id(id) + ": no such scene"};
+    if (it == state_->scenes.end()) return no_such_scene(id);
     *out = it->second.summary;
     return grpc::Status::OK;
 }

@@ -27,15 +27,16 @@ inline constexpr int kMaxFlightPlanPoses = kMaxWindow;
 /// SessionConfig.client_name goes into log lines: longer names, and names with control
 /// characters, are malformed requests.
 inline constexpr std::size_t kMaxClientNameLength = 256;
+/// C0 control bytes and DEL: what a log line must never carry raw from a client (a newline
+/// forges a line, an escape sequence hides one). Client names with them are refused, scene
+/// ids are echoed with them escaped.
+constexpr bool is_control_byte(unsigned char byte) {
+    return byte < 0x20 || byte == 0x7f;
+}
 /// Pose positions further out are malformed: the scene loaders' bound on stored coordinates
 /// (kMaxAbsCoordinate, renderer/src/scene_io_detail.cpp), so no scene reaches that far, and
 /// far enough inside double range that a camera's translation stays finite.
 inline constexpr double kMaxAbsPosition = 1e30;
-/// Fields of view (degrees) the focal lengths or horizontal_fov_degrees may give: a focal
-/// length that a float cannot hold renders a blank frame, and this range keeps it within
-/// about 4e-4..1e9 pixels for every protocol image size.
-inline constexpr double kMinFieldOfViewDegrees = 1e-3;
-inline constexpr double kMaxFieldOfViewDegrees = 179.9;
 /// Server-side defaults for fields left at zero.
 inline constexpr int kDefaultJpegQuality = 85;
 inline constexpr double kDefaultHorizontalFovDegrees = 70.0;
