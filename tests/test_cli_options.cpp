@@ -86,17 +86,18 @@ TEST(CliOptions, ImageSideAndFieldOfViewAreCheckedWhenParsed) {
     };
     int width = 1;
     double fov = 1;
-    parse("--width 16384 --fov 179.5", width, fov);
+    parse("--width 16384 --fov 179.9", width, fov);
     EXPECT_EQ(width, 16384);
-    EXPECT_DOUBLE_EQ(fov, 179.5);
+    EXPECT_DOUBLE_EQ(fov, 179.9);
+    parse("--fov 0.001", width, fov);
+    EXPECT_DOUBLE_EQ(fov, 0.001);
     for (const auto& [args, message] :
          {std::pair{"--width 0", "--width: Value 0 not in range 1 to 16384"},
           std::pair{"--width 16385", "--width: Value 16385 not in range 1 to 16384"},
-          std::pair{"--fov 180",
-                    "--fov: the horizontal field of view must be strictly between 0 and 180 degrees, not 180"},
-          std::pair{"--fov 0", "strictly between 0 and 180 degrees, not 0"},
-          std::pair{"--fov -5", "strictly between 0 and 180 degrees, not -5"},
-          std::pair{"--fov nan", "strictly between 0 and 180 degrees, not nan"}}) {
+          std::pair{"--fov 180", "--fov: expected a horizontal field of view in degrees in [0.001, 179.9], not 180"},
+          std::pair{"--fov 179.95", "in [0.001, 179.9], not 179.95"}, std::pair{"--fov 0", "in [0.001, 179.9], not 0"},
+          std::pair{"--fov 0.0005", "in [0.001, 179.9], not 0.0005"},
+          std::pair{"--fov -5", "in [0.001, 179.9], not -5"}, std::pair{"--fov nan", "in [0.001, 179.9], not nan"}}) {
         try {
             parse(args, width, fov);
             FAIL() << args << " accepted";

@@ -28,16 +28,6 @@ CLI::Validator image_side() {
     return CLI::Range(1, kMaxImageSide);
 }
 
-CLI::Validator horizontal_fov() {
-    return CLI::Validator(
-        [](std::string& text) -> std::string {
-            double degrees = 0;
-            if (CLI::detail::lexical_cast(text, degrees) && degrees > 0 && degrees < 180) return {};
-            return "the horizontal field of view must be strictly between 0 and 180 degrees, not " + text;
-        },
-        "degrees in (0, 180)");
-}
-
 CLI::Validator bounded_number(double lo, double hi, const std::string& unit) {
     const std::string range = "[" + CLI::detail::to_string(lo) + ", " + CLI::detail::to_string(hi) + "]";
     return CLI::Validator(
@@ -47,6 +37,10 @@ CLI::Validator bounded_number(double lo, double hi, const std::string& unit) {
             return "expected " + unit + " in " + range + ", not " + text;
         },
         unit + " in " + range);
+}
+
+CLI::Validator horizontal_fov() {
+    return bounded_number(kMinFieldOfViewDegrees, kMaxFieldOfViewDegrees, "a horizontal field of view in degrees");
 }
 
 CLI::Validator thread_count() {

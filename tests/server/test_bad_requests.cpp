@@ -159,7 +159,7 @@ TEST_F(BadRequestTest, FocalLengthsOutsideASaneFieldOfView) {
     expect_open_fails(config, grpc::StatusCode::INVALID_ARGUMENT,
                       "open.horizontal_fov_degrees: 179.95 is outside [0.001, 179.9]");
     // The ends of the range render.
-    for (double fov : {server::kMinFieldOfViewDegrees, server::kMaxFieldOfViewDegrees}) {
+    for (double fov : {kMinFieldOfViewDegrees, kMaxFieldOfViewDegrees}) {
         config.set_horizontal_fov_degrees(fov);
         expect_one_frame(channel_to(server_->port()), config);
     }

@@ -69,6 +69,13 @@ inline constexpr double kBBoxSigmas = 3.0;
 /// trajectory line's 100000x100000, is refused by name instead of allocating without bound.
 inline constexpr int kMaxImageSide = 16384;
 
+/// Fields of view (degrees) that the tools' --fov and the protocol's focal lengths and
+/// horizontal_fov_degrees may give: a focal length that a float cannot hold renders a blank
+/// frame, and this range keeps it within about 4e-4..1e9 pixels for every image size up to
+/// kMaxImageSide.
+inline constexpr double kMinFieldOfViewDegrees = 1e-3;
+inline constexpr double kMaxFieldOfViewDegrees = 179.9;
+
 /// Most poses a speculative window may hold (CaT-GS: W in 1..16); a window's validity mask
 /// is a 32-bit word.
 inline constexpr int kMaxWindow = 16;

@@ -24,8 +24,8 @@ int run_reporting_errors(const char* tool, const std::function<int()>& body);
 /// --width and --height: 1..kMaxImageSide.
 CLI::Validator image_side();
 
-/// --fov, the horizontal field of view: strictly between 0 and 180 degrees (at 180 the focal
-/// length is 0).
+/// --fov, the horizontal field of view in degrees: kMinFieldOfViewDegrees..kMaxFieldOfViewDegrees,
+/// the protocol's range (at 180 the focal length is 0).
 CLI::Validator horizontal_fov();
 
 /// A number in [lo, hi]; NaN is refused too (CLI::Range lets it through). `unit` names the
