@@ -245,6 +245,78 @@ TEST(StageTiles, EllipseTouchesTileWhereTheEllipseReachesTheTilesPixelCentres) {
     EXPECT_LT(float_band, (touched + missed) / 1000);
 }
 
+/// Asks one TouchedTiles about every tile of the grid in `order` and checks each answer
+/// against `emitted` (for_each_touched_tile's tiles). Returns how many it said it touches.
+template <typename T>
+int check_touched_tiles(const Projected<T>& g, Culling mode, const View<T>& view, const std::vector<int>& emitted,
+                        const std::vector<std::uint32_t>& order, const std::string& where) {
+    TouchedTiles<T> touched(g, mode, view);
+    int yes = 0;
+    for (std::uint32_t tile : order) {
+        const bool got = touched.touches(tile);
+        yes += got;
+        EXPECT_EQ(got, emitted[tile] > 0) << where << " tile " << tile;
+        if (got != (emitted[tile] > 0)) return yes;  // one message a case
+    }
+    return yes;
+}
+
+// TouchedTiles (the re-key's question, tile by tile) says yes exactly for the tiles
+// for_each_touched_tile emits, whatever order it is asked in: row by row as a key frame
+// emits, shuffled, and each tile asked twice in a row; for both precisions and every culling
+// mode, on conics that are not positive definite (the per-tile fallback) and NaN means too.
+TEST(StageTiles, TouchedTilesAreTheTilesTheFootprintEmits) {
+    const std::uint64_t seed = test::fresh_seed("stage touched tiles");
+    std::mt19937_64 rng(seed);
+    int touched = 0, asked = 0;
+    for (int i = 0; i < 600; ++i) {
+        const int width = static_cast<int>(stage::uniform(rng, 1, 700)),
+                  height = static_cast<int>(stage::uniform(rng, 1, 500));
+        Projected<float> pf = stage::random_projected<float>(rng, width, height);
+        if (i % 10 == 3) pf.conic.y = 1.01f * std::sqrt(pf.conic.x * pf.conic.z);  // indefinite
+        if (i % 25 == 7) pf.mean.x = std::numeric_limits<float>::quiet_NaN();
+        const Projected<double> pd = stage::widened(pf);
+        const std::string where = "case " + std::to_string(i) + " (CATGS_TEST_SEED=" + std::to_string(seed) + ")";
+        const auto check = [&](const auto& g, const auto& view, Culling mode, const std::string& what) {
+            std::vector<int> emitted(static_cast<std::size_t>(view.tiles_x * view.tiles_y), 0);
+            std::vector<std::uint32_t> in_emission_order;
+            for_each_touched_tile(g, mode, view, [&](std::uint32_t t) {
+                ++emitted[t];
+                in_emission_order.push_back(t);
+            });
+            std::vector<std::uint32_t> all(emitted.size());
+            for (std::size_t t = 0; t < all.size(); ++t) all[t] = static_cast<std::uint32_t>(t);
+            std::vector<std::uint32_t> twice;
+            for (std::uint32_t t : all) twice.insert(twice.end(), {t, t});
+            std::vector<std::uint32_t> shuffled = all;
+            std::shuffle(shuffled.begin(), shuffled.end(), rng);
+            const std::string here = what + " " + culling_name(mode) + " " + where;
+            if (mode == Culling::exact) {  // one entry for tile 0: the list every tile shares
+                EXPECT_EQ(in_emission_order, std::vector<std::uint32_t>{0}) << here;
+                std::fill(emitted.begin(), emitted.end(), 1);
+            }
+            const int n = check_touched_tiles(g, mode, view, emitted, all, here + " row by row");
+            EXPECT_EQ(check_touched_tiles(g, mode, view, emitted, shuffled, here + " shuffled"), n) << here;
+            EXPECT_EQ(check_touched_tiles(g, mode, view, emitted, twice, here + " twice"), 2 * n) << here;
+            if (mode != Culling::exact) {
+                EXPECT_EQ(static_cast<std::size_t>(n), in_emission_order.size()) << here;
+                EXPECT_EQ(check_touched_tiles(g, mode, view, emitted, in_emission_order, here + " as emitted"), n)
+                    << here;
+            }
+            if (mode == Culling::exact) return;
+            touched += n;
+            asked += static_cast<int>(all.size());
+        };
+        for (Culling mode : {Culling::bbox3sigma, Culling::opacity_aware, Culling::exact}) {
+            check(pf, stage::image_view<float>(width, height), mode, "float");
+            check(pd, stage::image_view<double>(width, height), mode, "double");
+        }
+    }
+    std::cout << "[stage] TouchedTiles: " << touched << " of " << asked << " tiles touched (culled modes)" << std::endl;
+    EXPECT_GT(touched, asked / 50);
+    EXPECT_LT(touched, asked / 2);
+}
+
 /// The tile sets of for_each_window_tile (row spans) against the per-tile reference: a tile is
 /// in the union when some pose's rectangle holds it and that pose's ellipse reaches it
 /// (reference_min_q <= level). Returns the tiles decided within `band` (relative) of a level,

@@ -86,10 +86,13 @@ __global__ void rekey_kernel(ChunkSpace space, const std::uint64_t* touched, con
     const std::uint32_t tiles = static_cast<std::uint32_t>(view.tiles_x) * view.tiles_y;
     const Projected<T>& p = projected[i];
     const std::uint64_t from = emission_offset[slot], to = offsets[k];
+    // The key frame emitted these pairs row by row: each row's span is computed once.
+    TouchedTiles<T> footprint(p, culling, view);
+    // Exact culling shares one list among all tiles: nothing to filter.
+    const bool drawn = culling == Culling::exact || p.opacity > T(0);
     for (std::uint64_t j = 0; j < count; ++j) {
         const std::uint32_t tile = emitted_tiles[from + j];
-        // Exact culling shares one list among all tiles: nothing to filter.
-        const bool keep = culling == Culling::exact || (p.opacity > T(0) && touches_tile(p, culling, view, tile));
+        const bool keep = drawn && footprint.touches(tile);
         keys[to + j] = static_cast<Key>(keep ? tile : parked_tile(tiles));
         values[to + j] = static_cast<std::uint32_t>(i);
     }

@@ -373,12 +373,18 @@ void CpuRenderer<T>::rekey(const View<T>& view, Culling culling) {
     keys_.resize(emitted_keys_.size());
     values_ = emitted_values_;
     parallel_for(keys_.size(), kGaussianGrain * 16, threads_, [&](std::size_t begin, std::size_t end) {
-        for (std::size_t j = begin; j < end; ++j) {
-            const Projected<T>& p = projected_[values_[j]];
-            const std::uint32_t tile = key_tile(emitted_keys_[j]);
+        // A Gaussian's pairs are consecutive, row by row: one TouchedTiles serves them all.
+        for (std::size_t j = begin; j < end;) {
+            const std::uint32_t gaussian = values_[j];
+            const Projected<T>& p = projected_[gaussian];
+            TouchedTiles<T> footprint(p, culling, view);
             // Exact culling shares one list among all tiles: nothing to filter.
-            const bool keep = culling == Culling::exact || (p.opacity > 0 && touches_tile(p, culling, view, tile));
-            keys_[j] = make_sort_key(keep ? tile : parked_tile(tiles), p.key_depth);
+            const bool drawn = culling == Culling::exact || p.opacity > 0;
+            for (; j < end && values_[j] == gaussian; ++j) {
+                const std::uint32_t tile = key_tile(emitted_keys_[j]);
+                const bool keep = drawn && footprint.touches(tile);
+                keys_[j] = make_sort_key(keep ? tile : parked_tile(tiles), p.key_depth);
+            }
         }
     });
 }

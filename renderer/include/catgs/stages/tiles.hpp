@@ -200,16 +200,47 @@ CATGS_HD TileSpan footprint_row(const Projected<T>& g, Culling mode, const TileR
     return x0 < x1 ? TileSpan{x0, x1} : TileSpan{rect.x0, rect.x0};
 }
 
-/// Does a single-frame footprint touch tile `tile`? Exactly the tiles for_each_touched_tile
-/// emits (exact mode: every tile), through the same row spans.
+/// Which tiles a single-frame footprint touches, asked tile by tile: exactly the tiles
+/// for_each_touched_tile emits (exact mode: every tile), through the same row spans. The
+/// rectangle and the ellipse are set up once, and a row's span is kept for the next question:
+/// a cached frame's re-key asks about a key frame's pairs, which come row by row, so each row's
+/// span (two double square roots) is computed once, not once a tile (which was most of a
+/// re-keying frame at 4K).
+template <typename T>
+class TouchedTiles {
+public:
+    CATGS_HD TouchedTiles(const Projected<T>& g, Culling mode, const View<T>& view)
+        : g_(g), view_(view), mode_(mode), rect_{0, 0, 0, 0}, row_(-1), span_{0, 0} {
+        if (mode == Culling::exact) return;
+        rect_ = tile_rect(g, mode, view.tiles_x, view.tiles_y);
+        if (mode == Culling::opacity_aware && !rect_.empty()) rows_ = EllipseRows<T>(g, opacity_level(g.opacity));
+    }
+
+    CATGS_HD bool touches(std::uint32_t tile) {
+        if (mode_ == Culling::exact) return true;
+        const int tx = static_cast<int>(tile % view_.tiles_x), ty = static_cast<int>(tile / view_.tiles_x);
+        if (tx < rect_.x0 || tx >= rect_.x1 || ty < rect_.y0 || ty >= rect_.y1) return false;
+        if (ty != row_) {
+            span_ = footprint_row(g_, mode_, rect_, ty, view_, T(0), rows_);
+            row_ = ty;
+        }
+        return tx >= span_.x0 && tx < span_.x1;
+    }
+
+private:
+    const Projected<T>& g_;
+    const View<T>& view_;
+    Culling mode_;
+    TileRect rect_;
+    EllipseRows<T> rows_;
+    int row_;  // the row span_ belongs to (-1: none yet)
+    TileSpan span_;
+};
+
+/// Does a single-frame footprint touch tile `tile`? (One question of TouchedTiles.)
 template <typename T>
 CATGS_HD bool touches_tile(const Projected<T>& g, Culling mode, const View<T>& view, std::uint32_t tile) {
-    if (mode == Culling::exact) return true;
-    const TileRect r = tile_rect(g, mode, view.tiles_x, view.tiles_y);
-    const int tx = static_cast<int>(tile % view.tiles_x), ty = static_cast<int>(tile / view.tiles_x);
-    if (tx < r.x0 || tx >= r.x1 || ty < r.y0 || ty >= r.y1) return false;
-    const TileSpan s = footprint_row(g, mode, r, ty, view, T(0), EllipseRows<T>(g, opacity_level(g.opacity)));
-    return tx >= s.x0 && tx < s.x1;
+    return TouchedTiles<T>(g, mode, view).touches(tile);
 }
 
 /// Windows of at most this many poses get their own kernel instances (preprocess.cu, keys.cu):
