@@ -220,10 +220,10 @@ FamilyBounds bounds_for(Family f) {
             // a 1/255 contour would be full-scale too (not seen: float 1/82.7/0 over 100 seeds
             // on this path; 151 levels on 16% of one frame when the camera also turned and a
             // near-plane Gaussian crossed the plane). split 227/26.6/0.56%, bbox 227/28.9/0.43%.
-            // The fraction has a long tail: over 210 seeds of the property test split reached
-            // 1.15% (38.0 dB; CATGS_TEST_SEED=4476994884513330143, past the old 1% bound)
-            // and 28.9 dB, bbox 0.63% and 27.7 dB; the bounds keep 2-3x on the fraction and
-            // about 5 dB below the lowest PSNR seen (26.6 split, 27.7 bbox).
+            // The fraction has a long tail: over 240 seeds of the property test split reached
+            // 1.20% and 1.15% (CATGS_TEST_SEED=12276678495884296976 and 4476994884513330143,
+            // past the old 1% bound) and 28.9 dB, bbox 0.63% and 27.7 dB; the bounds keep 2-3x
+            // on the fraction and about 5 dB below the lowest PSNR seen (26.6 split, 27.7 bbox).
             return {kDoubleLossless, {255, 40.0, 0.01}, {255, 21.0, 0.03}, {255, 23.0, 0.02}, {255, 23.0, 0.02}};
     }
     return {};
