@@ -204,8 +204,7 @@ CATGS_HD TileSpan footprint_row(const Projected<T>& g, Culling mode, const TileR
 /// for_each_touched_tile emits (exact mode: every tile), through the same row spans. The
 /// rectangle and the ellipse are set up once, and a row's span is kept for the next question:
 /// a cached frame's re-key asks about a key frame's pairs, which come row by row, so each row's
-/// span (two double square roots) is computed once, not once a tile (which was most of a
-/// re-keying frame at 4K).
+/// span (two double square roots) is computed once, not once a tile.
 template <typename T>
 class TouchedTiles {
 public:
