@@ -107,6 +107,29 @@ TEST(CliOptions, ImageSideAndFieldOfViewAreCheckedWhenParsed) {
     }
 }
 
+// --quality is refused outside 1..100 while parsing, with the range in the message.
+TEST(CliOptions, JpegQualityIsCheckedWhenParsed) {
+    const auto parse = [](const std::string& args, int& quality) {
+        CLI::App app{"test"};
+        app.add_option("--quality", quality)->check(catgs::jpeg_quality());
+        app.parse(args, false);
+    };
+    int quality = 0;
+    parse("--quality 100", quality);
+    EXPECT_EQ(quality, 100);
+    parse("--quality 1", quality);
+    EXPECT_EQ(quality, 1);
+    for (const char* args : {"--quality 0", "--quality 101", "--quality -5"}) {
+        try {
+            parse(args, quality);
+            FAIL() << args << " accepted";
+        } catch (const CLI::ParseError& e) {
+            EXPECT_NE(std::string(e.what()).find("not in range 1 to 100"), std::string::npos)
+                << args << ": " << e.what();
+        }
+    }
+}
+
 // Thread counts from 0 (all cores) to kMaxThreads: a negative count or a typo such as 100000
 // is refused while parsing, before any thread starts.
 TEST(CliOptions, ThreadCountsAreCheckedWhenParsed) {

@@ -24,7 +24,7 @@ void add_session_flags(CLI::App* app, SessionFlags& f) {
         ->check(horizontal_fov())
         ->capture_default_str();
     app->add_option("--encoding", f.encoding, "jpeg, png or raw")->capture_default_str();
-    app->add_option("--quality", f.quality, "JPEG quality 1..100")->check(CLI::Range(1, 100))->capture_default_str();
+    app->add_option("--quality", f.quality, "JPEG quality 1..100")->check(jpeg_quality())->capture_default_str();
     app->add_option("--cache", f.cache,
                     "server, off or speculative (the inter-frame cache; the server's default is speculative)")
         ->capture_default_str();

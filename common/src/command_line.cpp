@@ -43,6 +43,10 @@ CLI::Validator horizontal_fov() {
     return bounded_number(kMinFieldOfViewDegrees, kMaxFieldOfViewDegrees, "a horizontal field of view in degrees");
 }
 
+CLI::Validator jpeg_quality() {
+    return CLI::Range(1, 100);
+}
+
 CLI::Validator thread_count() {
     return CLI::Range(0, kMaxThreads);
 }

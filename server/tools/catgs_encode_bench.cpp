@@ -235,7 +235,7 @@ int main(int argc, char** argv) {
     app.add_option("--only", o.only, "comma-separated encoder names (default: all)");
     app.add_option("--frames", o.frames, "timed encodes per encoder and size")->capture_default_str();
     app.add_option("--warmup", o.warmup, "untimed encodes first")->capture_default_str();
-    app.add_option("--quality", o.quality, "JPEG quality 1..100")->check(CLI::Range(1, 100))->capture_default_str();
+    app.add_option("--quality", o.quality, "JPEG quality 1..100")->check(catgs::jpeg_quality())->capture_default_str();
     app.add_flag("--444", o.chroma_444, "JPEG 4:4:4 chroma instead of 4:2:0");
     app.add_option("--scene", o.scene, "the scene rendered (PLY, .splat or builtin:city?...)")->capture_default_str();
     app.add_option("--trajectory", o.trajectory, "the flight whose middle pose is rendered")->capture_default_str();

@@ -28,6 +28,9 @@ CLI::Validator image_side();
 /// the protocol's range (at 180 the focal length is 0).
 CLI::Validator horizontal_fov();
 
+/// --quality, JPEG quality: 1..100, as libjpeg-turbo and the protocol take it.
+CLI::Validator jpeg_quality();
+
 /// A number in [lo, hi]; NaN is refused too (CLI::Range lets it through). `unit` names the
 /// number in --help and in the message.
 CLI::Validator bounded_number(double lo, double hi, const std::string& unit);
