@@ -43,8 +43,9 @@ std::size_t count_nonfinite(const ImageF& image) {
         std::count_if(image.rgb.begin(), image.rgb.end(), [](float v) { return !std::isfinite(v); }));
 }
 
-void Measured::add(const Frame& f, const ImageRGB8& reference) {
-    const ImageError e = compare(f.rgb8, reference);
+void Measured::add(const Frame& f, const Reference& reference) {
+    const ImageError e = compare(f.rgb8, reference.target_for(f.rgb8));
+    ill_conditioned += reference.ill_conditioned_count();
     max_abs = std::max(max_abs, e.max_abs);
     min_psnr = std::min(min_psnr, e.psnr);
     max_over_one = std::max(max_over_one, e.fraction_over_one);
@@ -60,6 +61,7 @@ void Measured::merge(const Measured& o) {
     nonfinite += o.nonfinite;
     rgb8_checked = rgb8_checked || o.rgb8_checked;
     rgb8_mismatch += o.rgb8_mismatch;
+    ill_conditioned += o.ill_conditioned;
     frames += o.frames;
     cached += o.cached;
 }
@@ -69,6 +71,7 @@ std::string describe(const Measured& m) {
     s << "max " << m.max_abs << " levels, psnr " << std::fixed << std::setprecision(1) << m.min_psnr << " dB, "
       << std::setprecision(4) << 100 * m.max_over_one << "% > 1 level, " << m.nonfinite << " non-finite, ";
     if (m.rgb8_checked) s << m.rgb8_mismatch << " rgb8 != quantised float, ";
+    if (m.ill_conditioned > 0) s << m.ill_conditioned << " ill-conditioned, ";
     s << m.cached << "/" << m.frames << " cached";
     return s.str();
 }
@@ -121,17 +124,55 @@ Frame reference_frame(const Scene& scene, const Camera& camera) {
     return f;
 }
 
-std::vector<Frame> reference_frames(const StressCase& c) {
-    std::vector<Frame> out;
-    for (const Camera& cam : c.path) out.push_back(reference_frame(c.scene, cam));
+std::size_t Reference::ill_conditioned_count() const {
+    std::size_t n = 0;
+    for (std::size_t i = 0; i < exact.rgb8.rgb.size(); ++i) n += ill_conditioned(i);
+    return n;
+}
+
+ImageRGB8 Reference::target_for(const ImageRGB8& image) const {
+    ImageRGB8 target = exact.rgb8;
+    if (image.rgb.size() != target.rgb.size()) return target;  // compare() reports the sizes
+    for (std::size_t i = 0; i < target.rgb.size(); ++i)
+        if (ill_conditioned(i)) target.rgb[i] = std::clamp(image.rgb[i], low.rgb[i], high.rgb[i]);
+    return target;
+}
+
+namespace {
+
+/// The scene with every opacity scaled by `factor` (Reference).
+Scene with_opacities_scaled(const Scene& scene, double factor) {
+    Scene s = scene;
+    for (float& o : s.opacities) o = static_cast<float>(o * factor);
+    return s;
+}
+
+}  // namespace
+
+std::vector<Reference> reference_frames(const StressCase& c) {
+    const Scene fainter = with_opacities_scaled(c.scene, 1 - kConditioningOpacity);
+    const Scene denser = with_opacities_scaled(c.scene, 1 + kConditioningOpacity);
+    std::vector<Reference> out;
+    for (const Camera& cam : c.path) {
+        Reference r{reference_frame(c.scene, cam), {}, {}};
+        r.low = r.high = r.exact.rgb8;
+        for (const Scene* probe : {&fainter, &denser}) {
+            const ImageRGB8 moved = reference_frame(*probe, cam).rgb8;
+            for (std::size_t i = 0; i < moved.rgb.size(); ++i) {
+                r.low.rgb[i] = std::min(r.low.rgb[i], moved.rgb[i]);
+                r.high.rgb[i] = std::max(r.high.rgb[i], moved.rgb[i]);
+            }
+        }
+        out.push_back(std::move(r));
+    }
     return out;
 }
 
-Measured measure(const Backend& backend, const std::vector<Frame>& frames, const std::vector<Frame>& reference) {
+Measured measure(const Backend& backend, const std::vector<Frame>& frames, const std::vector<Reference>& reference) {
     Measured m;
     m.rgb8_checked = backend.writes_rgb8();
     for (std::size_t k = 0; k < frames.size(); ++k) {
-        m.add(frames[k], reference[k].rgb8);
+        m.add(frames[k], reference[k]);
         if (!m.rgb8_checked) continue;
         const ImageRGB8 q = to_rgb8(frames[k].image);
         for (std::size_t i = 0; i < q.rgb.size() && i < frames[k].rgb8.rgb.size(); ++i)
@@ -142,9 +183,14 @@ Measured measure(const Backend& backend, const std::vector<Frame>& frames, const
 }
 
 Classes check_case(const Backend& backend, const StressCase& c, const std::string& note, bool small_image) {
-    const std::vector<Frame> reference = reference_frames(c);
+    const std::vector<Reference> reference = reference_frames(c);
     std::size_t reference_nonfinite = 0;
-    for (const Frame& f : reference) reference_nonfinite += count_nonfinite(f.image);
+    for (const Reference& r : reference) {
+        reference_nonfinite += count_nonfinite(r.exact.image);
+        EXPECT_LE(static_cast<double>(r.ill_conditioned_count()),
+                  kMaxIllConditioned * static_cast<double>(r.exact.rgb8.rgb.size()))
+            << c.name << ": the double reference is ill-conditioned at too many values to check " << note;
+    }
     EXPECT_EQ(reference_nonfinite, 0u) << c.name << ": the double reference wrote non-finite values " << note;
     const int width = c.path[0].intrinsics.width, height = c.path[0].intrinsics.height;
     Classes classes;
@@ -230,11 +276,11 @@ void measure_bounds(const Backend& backend) {
         for (double fov : {5.0, 20.0, 90.0, 150.0})
             cases.push_back(field_of_view(seed + static_cast<std::uint64_t>(fov), fov));
         for (const StressCase& c : cases) {
-            const std::vector<Frame> reference = reference_frames(c);
+            const std::vector<Reference> reference = reference_frames(c);
             const std::string family = family_name(c.family);
             for (const Config& cfg : backend.configs()) {
                 Measured m = measure(backend, backend.render(c, cfg), reference);
-                for (const Frame& f : reference) m.nonfinite += count_nonfinite(f.image);
+                for (const Reference& r : reference) m.nonfinite += count_nonfinite(r.exact.image);
                 worst[family + " " + backend.class_label(cfg)].merge(m);
                 worst[family + " / " + backend.config_name(cfg)].merge(m);
             }

@@ -1,5 +1,6 @@
 // The half of the numerical stress suite that does not depend on the backend: the pipeline
-// configurations, how renders are measured against the exact double reference and logged,
+// configurations, how renders are measured against the exact double reference (held to its
+// range where it is ill-conditioned: Reference) and logged,
 // the bounds' vocabulary, the cases of the property tests, the crop comparison of the
 // 8192 x 8192 tests, and what a backend provides (stress::Backend). tests/stress_suite.cpp
 // runs the families and the property tests on every backend of the binary;
@@ -65,6 +66,8 @@ struct Frame {
 
 // --- Measurements ---------------------------------------------------------------------
 
+struct Reference;
+
 struct Measured {
     int max_abs = 0;
     double min_psnr = std::numeric_limits<double>::infinity();
@@ -74,10 +77,12 @@ struct Measured {
     /// the quantised float image; then `rgb8_mismatch` counts the values that do not.
     bool rgb8_checked = false;
     std::size_t rgb8_mismatch = 0;
+    /// Channel values held to the reference's range rather than its exact value (Reference).
+    std::size_t ill_conditioned = 0;
     int frames = 0, cached = 0;
 
-    /// Adds a frame against its reference image.
-    void add(const Frame& f, const ImageRGB8& reference);
+    /// Adds a frame against its reference.
+    void add(const Frame& f, const Reference& reference);
     void merge(const Measured& o);
 };
 
@@ -186,12 +191,44 @@ std::vector<std::string> stress_backend_names();
 const Backend& stress_backend(const std::string& name);
 
 /// The exact double reference (CpuRenderer<double>, exact culling, no split, no cache) of one
-/// camera, and of every frame of a case's path.
+/// camera.
 Frame reference_frame(const Scene& scene, const Camera& camera);
-std::vector<Frame> reference_frames(const StressCase& c);
+
+/// The relative change of every opacity by which the reference is probed for values that
+/// rounding may move by more than one level: about 100 times float's rounding of an alpha
+/// (its exp and its power, ~1e-6 relative), and far below any error the bounds look for. An
+/// alpha that lands within it of 1/255, or a transmittance within it of the 1e-4 stop, moves a
+/// value by its colour times T / 255, which for the clamped colours of huge SH (up to
+/// kMaxShColour = 1e4) is full scale: float and double then disagree by up to 255 levels at
+/// that value without either being wrong (CATGS_TEST_SEED=13205819217021527008, huge sh:
+/// 93 levels at one value; 8412562199189686241, extreme sh: 229).
+inline constexpr double kConditioningOpacity = 1e-4;
+
+/// The reference of one frame and how well conditioned each of its 8-bit channel values is.
+/// `low` and `high` hold, per value, the least and greatest of the exact reference and of the
+/// reference with every opacity scaled by 1 -+ kConditioningOpacity. A value whose range spans
+/// more than one level is ill-conditioned: a render is held to that range there, and to the
+/// exact value everywhere else (so the thresholds' one-level moves stay checked exactly).
+struct Reference {
+    Frame exact;
+    ImageRGB8 low, high;
+
+    bool ill_conditioned(std::size_t i) const { return high.rgb[i] - low.rgb[i] > 1; }
+    std::size_t ill_conditioned_count() const;
+    /// The image `image` is compared with: the exact reference, with each ill-conditioned
+    /// value replaced by the nearest value of its range to `image`'s.
+    ImageRGB8 target_for(const ImageRGB8& image) const;
+};
+
+/// The reference of every frame of a case's path.
+std::vector<Reference> reference_frames(const StressCase& c);
+
+/// The largest fraction of a frame's channel values that may be ill-conditioned before a case
+/// fails: the band must not excuse a whole image (measured: at most one value per frame so far).
+inline constexpr double kMaxIllConditioned = 0.01;
 
 /// A backend's frames against the reference frames of the same path.
-Measured measure(const Backend& backend, const std::vector<Frame>& frames, const std::vector<Frame>& reference);
+Measured measure(const Backend& backend, const std::vector<Frame>& frames, const std::vector<Reference>& reference);
 
 /// Renders every configuration of the case, checks each against the family's bound (failures
 /// carry `note`) and returns the worst measurement per bound class.
