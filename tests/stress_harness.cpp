@@ -185,12 +185,7 @@ Measured measure(const Backend& backend, const std::vector<Frame>& frames, const
 Classes check_case(const Backend& backend, const StressCase& c, const std::string& note, bool small_image) {
     const std::vector<Reference> reference = reference_frames(c);
     std::size_t reference_nonfinite = 0;
-    for (const Reference& r : reference) {
-        reference_nonfinite += count_nonfinite(r.exact.image);
-        EXPECT_LE(static_cast<double>(r.ill_conditioned_count()),
-                  kMaxIllConditioned * static_cast<double>(r.exact.rgb8.rgb.size()))
-            << c.name << ": the double reference is ill-conditioned at too many values to check " << note;
-    }
+    for (const Reference& r : reference) reference_nonfinite += count_nonfinite(r.exact.image);
     EXPECT_EQ(reference_nonfinite, 0u) << c.name << ": the double reference wrote non-finite values " << note;
     const int width = c.path[0].intrinsics.width, height = c.path[0].intrinsics.height;
     Classes classes;

@@ -197,10 +197,11 @@ Frame reference_frame(const Scene& scene, const Camera& camera);
 /// The relative change of every opacity by which the reference is probed for values that
 /// rounding may move by more than one level: about 100 times float's rounding of an alpha
 /// (its exp and its power, ~1e-6 relative), and far below any error the bounds look for. An
-/// alpha that lands within it of 1/255, or a transmittance within it of the 1e-4 stop, moves a
-/// value by its colour times T / 255, which for the clamped colours of huge SH (up to
-/// kMaxShColour = 1e4) is full scale: float and double then disagree by up to 255 levels at
-/// that value without either being wrong (CATGS_TEST_SEED=13205819217021527008, huge sh:
+/// alpha that lands within it of 1/255 moves a value by up to its colour times T / 255, a
+/// transmittance within it of the 1e-4 stop by its colour times alpha times 1e-4; with the
+/// clamped colours of huge SH (up to kMaxShColour = 1e4) either can be full scale, and float
+/// and double then disagree by up to 255 levels at that value without either being wrong
+/// (CATGS_TEST_SEED=13205819217021527008, huge sh:
 /// 93 levels at one value; 8412562199189686241, extreme sh: 229).
 inline constexpr double kConditioningOpacity = 1e-4;
 
@@ -209,6 +210,12 @@ inline constexpr double kConditioningOpacity = 1e-4;
 /// reference with every opacity scaled by 1 -+ kConditioningOpacity. A value whose range spans
 /// more than one level is ill-conditioned: a render is held to that range there, and to the
 /// exact value everywhere else (so the thresholds' one-level moves stay checked exactly).
+/// The logs count such values ("N ill-conditioned", summed over the frames measured): over 169
+/// seeds of every family and 22 of the property tests, none in the families without colours
+/// above 1, and in the worst run 100 over 42 frames of 8640 values. No bound is set on that
+/// count: a Gaussian of opacity
+/// 1/255 + 1 ulp, colour 1e4 and a screen-filling footprint makes a whole disc ill-conditioned
+/// without any renderer being wrong.
 struct Reference {
     Frame exact;
     ImageRGB8 low, high;
@@ -222,10 +229,6 @@ struct Reference {
 
 /// The reference of every frame of a case's path.
 std::vector<Reference> reference_frames(const StressCase& c);
-
-/// The largest fraction of a frame's channel values that may be ill-conditioned before a case
-/// fails: the band must not excuse a whole image (measured: at most one value per frame so far).
-inline constexpr double kMaxIllConditioned = 0.01;
 
 /// A backend's frames against the reference frames of the same path.
 Measured measure(const Backend& backend, const std::vector<Frame>& frames, const std::vector<Reference>& reference);
