@@ -364,6 +364,37 @@ TEST(SceneIoSog, UnbundledNamesMustStayInTheirFolder) {
                  {"texture name '../means_l.webp' is not a plain file name", "meta.json 'means.files[0]'"});
 }
 
+// A link beside the meta.json may lead anywhere in the scene root, not out of it: the server
+// refuses such links as scenes (resolve_path) and sets LoadOptions::scene_root for the rest.
+TEST(SceneIoSog, UnbundledTexturesMustResolveInsideTheSceneRoot) {
+    namespace fs = std::filesystem;
+    const fs::path root = tmp_path("root"), outside = tmp_path("outside");
+    fs::remove_all(root);
+    fs::remove_all(outside);
+    const fs::path scene = root / "scene", shared = root / "shared";
+    for (const fs::path& d : {scene, shared, outside}) fs::create_directories(d);
+    for (const auto& [name, bytes] : HandSog(3).entries()) write_file((scene / name).string(), bytes);
+    const std::string meta = (scene / "meta.json").string();
+    auto link_from = [&](const fs::path& dir, const std::string& name) {
+        fs::rename(scene / name, dir / name);
+        fs::create_symlink(dir / name, scene / name);
+    };
+    catgs::LoadOptions confined = absolute();
+    confined.scene_root = root.string();
+
+    link_from(shared, "sh0.webp");  // elsewhere in the root: followed
+    EXPECT_EQ(catgs::read_sog(meta, confined).count(), 3u);
+
+    link_from(outside, "means_u.webp");
+    expect_error([&] { catgs::read_sog(meta, confined); }, meta,
+                 {"texture 'means_u.webp' resolves outside the scene root (a link?)", "meta.json 'means.files[1]'"});
+    // Without a root (catgs-render, the tools) the user's own links are followed.
+    EXPECT_EQ(catgs::read_sog(meta, absolute()).count(), 3u);
+    // A missing texture still says it is missing.
+    fs::remove(outside / "means_u.webp");
+    expect_error([&] { catgs::read_sog(meta, confined); }, meta, {"cannot open", "means_u.webp"});
+}
+
 TEST(SceneIoSog, MaxRecordsIsCheckedBeforeAnyTexture) {
     HandSog sog(3);
     sog.textures.erase("means_l.webp");  // never reached

@@ -4,8 +4,10 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <cstring>
+#include <system_error>
 
 namespace catgs {
 
@@ -56,6 +58,19 @@ std::optional<std::string> read_regular_file(const std::string& path, std::uint6
     }
     ::close(fd);
     return bytes;
+}
+
+bool is_within(const std::filesystem::path& root, const std::filesystem::path& path) {
+    const auto [root_end, path_at] = std::mismatch(root.begin(), root.end(), path.begin(), path.end());
+    return root_end == root.end();
+}
+
+bool resolves_within(const std::filesystem::path& root, const std::filesystem::path& path) {
+    std::error_code ec;
+    const std::filesystem::path resolved_root = std::filesystem::canonical(root, ec);
+    if (ec) return false;
+    const std::filesystem::path resolved = std::filesystem::canonical(path, ec);
+    return !ec && is_within(resolved_root, resolved);
 }
 
 }  // namespace catgs

@@ -105,8 +105,10 @@ private:
 /// The textures of an unbundled meta.json: plain file names in the meta.json's directory.
 class DirectoryFiles final : public SogFiles {
 public:
-    explicit DirectoryFiles(const std::string& meta_path)
-        : SogFiles(meta_path), directory_(std::filesystem::path(meta_path).parent_path()) {}
+    DirectoryFiles(const std::string& meta_path, std::string scene_root)
+        : SogFiles(meta_path),
+          directory_(std::filesystem::path(meta_path).parent_path()),
+          scene_root_(std::move(scene_root)) {}
 
     std::uint64_t stored_bytes(const std::string& name, const std::string& key) override {
         std::uint64_t size = 0;
@@ -133,10 +135,15 @@ private:
         if (name.empty() || name == "." || name == ".." ||
             name.find_first_of(std::string("/\\\0", 3)) != std::string::npos)
             fail(path_, "texture name " + quote(name) + " is not a plain file name", at_key(key));
-        return open_regular(path_, (directory_ / name).string(), where(name), size);
+        const std::filesystem::path file = directory_ / name;
+        // A missing file is left to open_regular, whose message says so.
+        if (!scene_root_.empty() && std::filesystem::exists(file) && !resolves_within(scene_root_, file))
+            fail(path_, "texture " + quote(name) + " resolves outside the scene root (a link?)", at_key(key));
+        return open_regular(path_, file.string(), where(name), size);
     }
 
     std::filesystem::path directory_;
+    std::string scene_root_;
 };
 
 }  // namespace
@@ -166,8 +173,8 @@ std::unique_ptr<SogFiles> zip_files(const std::string& path, std::FILE* file) {
     return std::make_unique<ZipFiles>(path, file);
 }
 
-std::unique_ptr<SogFiles> directory_files(const std::string& meta_path) {
-    return std::make_unique<DirectoryFiles>(meta_path);
+std::unique_ptr<SogFiles> directory_files(const std::string& meta_path, const std::string& scene_root) {
+    return std::make_unique<DirectoryFiles>(meta_path, scene_root);
 }
 
 }  // namespace catgs::sog

@@ -51,7 +51,8 @@ std::vector<unsigned char> read_all(const std::string& path, std::FILE* file, st
 
 /// The entries of the zip archive `file` (taken over) of the .sog at `path`.
 std::unique_ptr<SogFiles> zip_files(const std::string& path, std::FILE* file);
-/// The textures beside the unbundled meta.json at `meta_path`.
-std::unique_ptr<SogFiles> directory_files(const std::string& meta_path);
+/// The textures beside the unbundled meta.json at `meta_path`, each refused unless it resolves
+/// inside `scene_root` (LoadOptions::scene_root; empty: not checked).
+std::unique_ptr<SogFiles> directory_files(const std::string& meta_path, const std::string& scene_root);
 
 }  // namespace catgs::sog

@@ -437,7 +437,7 @@ Scene read_sog(const std::string& path, const LoadOptions& options, LoadReport* 
             fail(path, "file of " + std::to_string(size) + " bytes is neither a zip archive nor a SOG meta.json", "");
         meta_bytes = read_all(path, file.get(), size, "meta.json");
         file.reset();
-        files = sog::directory_files(path);
+        files = sog::directory_files(path, options.scene_root);
     }
     const SogMeta meta = read_meta(path, parse_json(path, meta_bytes));
     check_count_against_size(path, meta, *files, meta_bytes.size(), options);

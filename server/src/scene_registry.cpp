@@ -8,6 +8,7 @@
 
 #include "catgs/builtin_spec.hpp"
 #include "catgs/error.hpp"
+#include "catgs/regular_file.hpp"
 #include "catgs/scene_io.hpp"
 #include "catgs/server/request_validation.hpp"
 
@@ -144,8 +145,7 @@ grpc::Status SceneRegistry::resolve_path(const std::string& relative, std::strin
     // where the file really is.
     const fs::path full = fs::canonical(root / rel, ec);
     if (ec) return {grpc::StatusCode::INVALID_ARGUMENT, "source '" + relative + "': no such file under the scene root"};
-    auto [root_end, full_it] = std::mismatch(root.begin(), root.end(), full.begin(), full.end());
-    if (root_end != root.end())
+    if (!is_within(root, full))
         return {grpc::StatusCode::INVALID_ARGUMENT, "source '" + relative + "': path leaves the scene root"};
     if (!fs::is_regular_file(full, ec))
         return {grpc::StatusCode::INVALID_ARGUMENT, "source '" + relative + "': not a regular file"};
@@ -205,6 +205,9 @@ grpc::Status SceneRegistry::load(const std::string& requested_id, const std::str
     try {
         LoadOptions options;
         options.drop_invalid = drop_invalid;
+        // The files a scene names beside itself (an unbundled SOG's textures) stay under the
+        // root too: a link there must not reach what resolve_path refuses to open directly.
+        if (!trusted) options.scene_root = scene_root_;
         // A compressed file (.spz, SOG, compressed PLY) may declare far more Gaussians than
         // its size suggests: the readers refuse a count the memory left cannot hold at the
         // file's SH degree before they allocate for it (at degree 0's cost a degree-3 file

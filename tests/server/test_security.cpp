@@ -5,6 +5,7 @@
 
 #include <cstdlib>
 #include <filesystem>
+#include <fstream>
 
 #include "process_util.hpp"
 #include "server_test_util.hpp"
@@ -364,6 +365,29 @@ TEST_F(ScenePathTest, WaysOutOfTheRootAreRefused) {
     const grpc::Status status = load("linkdir/secret.ply", "x");
     EXPECT_EQ(status.error_message().find(base_.string()), std::string::npos) << status.error_message();
     // Nothing was loaded.
+    EXPECT_EQ(server_->core().scenes().list().size(), 1u);
+}
+
+// An unbundled SOG names its textures beside its meta.json: a link there that leaves the root
+// is refused like a scene path that does, naming the texture but not the server's directories.
+TEST_F(ScenePathTest, SceneFilesThatLinkOutOfTheRootAreRefused) {
+    fs::create_directories(root_ / "sog");
+    std::ofstream(root_ / "sog" / "meta.json") << R"({"version": 2, "count": 1,
+               "means": {"mins": [0, 0, 0], "maxs": [1, 1, 1], "files": ["means_l.webp", "means_u.webp"]},
+               "scales": {"codebook": [0], "files": ["scales.webp"]}, "quats": {"files": ["quats.webp"]},
+               "sh0": {"codebook": [0], "files": ["sh0.webp"]}})";
+    for (const char* name : {"means_u.webp", "scales.webp", "quats.webp", "sh0.webp"})
+        std::ofstream(root_ / "sog" / name) << "not read: the link is refused first";
+    std::ofstream(base_ / "elsewhere" / "means_l.webp") << "outside the root";
+    fs::create_symlink(base_ / "elsewhere" / "means_l.webp", root_ / "sog" / "means_l.webp");
+
+    const grpc::Status status = load("sog/meta.json", "x");
+    EXPECT_EQ(status.error_code(), grpc::StatusCode::INVALID_ARGUMENT) << status.error_message();
+    EXPECT_NE(status.error_message().find(
+                  "source: sog/meta.json: texture 'means_l.webp' resolves outside the scene root (a link?)"),
+              std::string::npos)
+        << status.error_message();
+    EXPECT_EQ(status.error_message().find(base_.string()), std::string::npos) << status.error_message();
     EXPECT_EQ(server_->core().scenes().list().size(), 1u);
 }
 

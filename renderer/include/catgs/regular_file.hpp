@@ -5,6 +5,7 @@
 #pragma once
 
 #include <cstdint>
+#include <filesystem>
 #include <optional>
 #include <string>
 
@@ -23,5 +24,13 @@ int open_regular_file(const std::string& path, std::uint64_t& size, std::string&
 /// The whole of the regular file at `path` if it holds at most `max_bytes`; otherwise nullopt
 /// with `problem` set to why.
 std::optional<std::string> read_regular_file(const std::string& path, std::uint64_t max_bytes, std::string& problem);
+
+/// Whether `path` lies inside the directory `root`, both already resolved
+/// (std::filesystem::canonical), compared component by component: /a/bc is not inside /a/b.
+bool is_within(const std::filesystem::path& root, const std::filesystem::path& path);
+
+/// Whether `path` lies inside the directory `root` once both are resolved (links, "." and ".."
+/// followed); false when either cannot be resolved.
+bool resolves_within(const std::filesystem::path& root, const std::filesystem::path& path);
 
 }  // namespace catgs

@@ -45,6 +45,11 @@ struct LoadOptions {
     /// rather than deriving max_records from one degree's cost. Loading itself briefly needs
     /// 24 bytes more per record (the double positions, until the origin is known).
     std::uint64_t max_scene_bytes = std::numeric_limits<std::uint64_t>::max();
+    /// The directory that the files a scene names beside itself (an unbundled SOG's textures
+    /// next to its meta.json) must lie in once links are followed; such a file outside it is
+    /// refused, naming it. The server sets its --scene-root, so that a link in the root cannot
+    /// reach files it would refuse to open as scenes. Empty: not checked.
+    std::string scene_root;
     /// read_spz: the axes of the file's data (see SpzAxes).
     SpzAxes spz_axes = SpzAxes::rdf;
     Progress progress;
