@@ -58,6 +58,29 @@ TEST(RegularFile, ReadsARegularFileWhole) {
     EXPECT_EQ(read_token(path), "first line");
 }
 
+TEST(RegularFile, ContainmentComparesWholeComponentsAfterFollowingLinks) {
+    EXPECT_TRUE(is_within("/a/b", "/a/b"));
+    EXPECT_TRUE(is_within("/a/b", "/a/b/c/d"));
+    EXPECT_TRUE(is_within("/", "/a"));
+    EXPECT_FALSE(is_within("/a/b", "/a/bc"));  // a prefix of the text, not of the path
+    EXPECT_FALSE(is_within("/a/b", "/a"));
+
+    const TempDirectory dir("regular_file_within");
+    const fs::path root = dir.path / "root", outside = dir.path / "outside";
+    fs::create_directories(root / "sub");
+    fs::create_directories(outside);
+    std::ofstream(root / "sub" / "in.bin") << "in";
+    std::ofstream(outside / "out.bin") << "out";
+    fs::create_symlink(outside / "out.bin", root / "out-link.bin");
+    fs::create_symlink(root / "sub" / "in.bin", root / "in-link.bin");
+    EXPECT_TRUE(resolves_within(root, root / "sub" / "in.bin"));
+    EXPECT_TRUE(resolves_within(root, root / "in-link.bin"));
+    EXPECT_TRUE(resolves_within(root, root / "sub" / ".." / "sub" / "in.bin"));
+    EXPECT_FALSE(resolves_within(root, root / "out-link.bin"));
+    EXPECT_FALSE(resolves_within(root, root / ".." / "outside" / "out.bin"));
+    EXPECT_FALSE(resolves_within(root, root / "missing.bin"));  // cannot be resolved
+}
+
 TEST(RegularFile, AFileOverItsBoundIsRefusedWithItsSize) {
     const TempDirectory dir("regular_file_bound");
     const std::string path = (dir.path / "big.txt").string();
