@@ -201,8 +201,8 @@ Frame reference_frame(const Scene& scene, const Camera& camera);
 /// transmittance within it of the 1e-4 stop by its colour times alpha times 1e-4; with the
 /// clamped colours of huge SH (up to kMaxShColour = 1e4) either can be full scale, and float
 /// and double then disagree by up to 255 levels at that value without either being wrong
-/// (CATGS_TEST_SEED=13205819217021527008, huge sh:
-/// 93 levels at one value; 8412562199189686241, extreme sh: 229).
+/// (CATGS_TEST_SEED=13205819217021527008, huge sh: 93 levels at one value;
+/// 8412562199189686241, extreme sh: 229).
 inline constexpr double kConditioningOpacity = 1e-4;
 
 /// The reference of one frame and how well conditioned each of its 8-bit channel values is.
@@ -212,10 +212,10 @@ inline constexpr double kConditioningOpacity = 1e-4;
 /// exact value everywhere else (so the thresholds' one-level moves stay checked exactly).
 /// The logs count such values ("N ill-conditioned", summed over the frames measured): over 169
 /// seeds of every family and 22 of the property tests, none in the families without colours
-/// above 1, and in the worst run 100 over 42 frames of 8640 values. No bound is set on that
-/// count: a Gaussian of opacity
-/// 1/255 + 1 ulp, colour 1e4 and a screen-filling footprint makes a whole disc ill-conditioned
-/// without any renderer being wrong.
+/// above 1, and in the worst run 100 over 42 frames of 8640 values (100 further property-test
+/// seeds failed nothing). No bound is set on that count: a Gaussian of opacity 1/255 + 1 ulp,
+/// colour 1e4 and a screen-filling footprint makes a whole disc ill-conditioned without any
+/// renderer being wrong.
 struct Reference {
     Frame exact;
     ImageRGB8 low, high;
