@@ -29,8 +29,13 @@ inline constexpr double kJacobianClampFactor = 1.3;
 inline constexpr double kCovarianceBlur = 0.3;
 
 /// Per-Gaussian alpha is capped at 0.99 so that one Gaussian never makes a pixel fully
-/// opaque on its own (graphdeco, gsplat MAX_ALPHA).
-inline constexpr double kMaxAlpha = 0.99;
+/// opaque on its own (graphdeco, gsplat MAX_ALPHA). It is float's 0.99 (0.99000001) in every
+/// precision, as graphdeco's float kernel has it: with the exact 0.99, two layers at the cap
+/// leave T = (1 - 0.99)^2 = 1e-4 exactly, a tie with kMinTransmittance that float (which
+/// stops: 0.99f > 0.99) and double (which draws the second layer: 1 - 0.99 > 0.01 there)
+/// break opposite ways, 2.5 levels apart at such a pixel. With float's value every precision
+/// gets T = 9.99998e-5 and stops. (CATGS_TEST_SEED=1859812409409949438, opacities family.)
+inline constexpr double kMaxAlpha = static_cast<double>(0.99f);
 
 /// A Gaussian whose alpha at a pixel is below 1/255 is skipped: it cannot change an 8-bit
 /// value. The same bound defines opacity-aware culling and the load-time opacity filter.
