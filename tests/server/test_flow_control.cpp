@@ -39,11 +39,15 @@ TEST_F(FlowControlTest, LatestPoseWinsWhenTheClientDoesNotAcknowledge) {
     v1::SessionConfig config = session_config(v1::ENCODING_JPEG);
     config.set_max_unacked_frames(2);
     ASSERT_TRUE(client.open(config));
-    // The first two poses slowly enough that each renders (a 160x90 render takes tens of ms)...
+    // The first two poses each render: the client waits to receive each frame (receiving is
+    // not acknowledging) before it sends the next pose. Fixed sleeps here were a flake: under
+    // TSan on two busy cores the session was still opening when pose 2 came, and coalesced
+    // pose 1.
+    std::vector<v1::Frame> frames(2);
     ASSERT_TRUE(client.send(frame_request(1, path[0], 0)));
-    std::this_thread::sleep_for(std::chrono::milliseconds(400));
+    ASSERT_TRUE(client.stream->Read(&frames[0]));
     ASSERT_TRUE(client.send(frame_request(2, path[1], 0)));
-    std::this_thread::sleep_for(std::chrono::milliseconds(400));
+    ASSERT_TRUE(client.stream->Read(&frames[1]));
     // ...then the credit is spent: the rest must wait, and only the newest survives.
     const auto coalesced_before = server_->stats().poses_coalesced;
     for (int i = 2; i < kPoses; ++i)
@@ -52,7 +56,6 @@ TEST_F(FlowControlTest, LatestPoseWinsWhenTheClientDoesNotAcknowledge) {
     // Give the server time to (wrongly) render more than its credit.
     std::this_thread::sleep_for(std::chrono::milliseconds(300));
     client.stream->WritesDone();
-    std::vector<v1::Frame> frames;
     for (v1::Frame f; client.stream->Read(&f);) frames.push_back(f);
     ASSERT_TRUE(client.stream->Finish().ok());
     // Two within the credit, and the newest pose, rendered after the client half-closed.
