@@ -113,6 +113,31 @@ TEST(CpuRendererAnalytic, TwoGaussiansCompositeInDepthOrder) {
         }
 }
 
+// Two opaque Gaussians on one pixel's ray, both at the alpha cap: T = (1 - 0.99)^2 is exactly
+// the 1e-4 stop in real arithmetic. The cap is float's 0.99 in every precision (kMaxAlpha), so
+// float and double both land 2e-6 under the stop and leave the far layer out, as graphdeco's
+// float kernel does; with the exact 0.99 the double reference drew it (a random-scene sweep
+// found float and double 2 levels apart at such a pixel).
+TEST(CpuRendererAnalytic, TwoCappedLayersStopBeforeTheSecond) {
+    Camera cam = test::forward_camera(32, 32, 40.0);
+    cam.intrinsics.cx = 15.5;  // both centres project onto pixel (15, 15)'s centre: alpha = cap
+    cam.intrinsics.cy = 15.5;
+    Scene scene = single_gaussian({0, 0, 9}, 0.5f, 1.0f, {-2.0f, 1.5f, -2.0f});   // far, green
+    append(scene, single_gaussian({0, 0, 4}, 0.2f, 1.0f, {1.5f, -2.0f, -2.0f}));  // near, red
+    const std::array<float, 3> bg{0.0f, 0.0f, 1.0f};
+    const double cap = static_cast<double>(0.99f), red = kShC0 * 1.5 + 0.5;
+    // Near layer at the cap, far layer not drawn, the rest of the light from the background.
+    const double expected[3] = {cap * red, 0.0, (1 - cap) * bg[2]};
+    // Images hold floats: 1e-6 is their rounding; the far layer would add 0.009 green.
+    const ImageF as_float = render<float>(scene, cam, Culling::exact, bg);
+    const ImageF as_double = render<double>(scene, cam, Culling::exact, bg);
+    const std::size_t pixel = 3 * (15 * 32 + 15);
+    for (int c = 0; c < 3; ++c) {
+        EXPECT_NEAR(as_float.rgb[pixel + c], expected[c], 1e-6) << "float, channel " << c;
+        EXPECT_NEAR(as_double.rgb[pixel + c], expected[c], 1e-6) << "double, channel " << c;
+    }
+}
+
 // Degree 1..3 real SH basis written out independently (graphdeco's sign convention) and
 // compared with sh_colour one coefficient at a time.
 TEST(CpuRendererAnalytic, ShDegreesOneToThreeMatchHandComputedBasis) {
