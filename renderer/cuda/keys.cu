@@ -67,10 +67,9 @@ __global__ void rekey_depth_kernel(ChunkSpace space, const std::uint64_t* touche
     if (p < space.slots && touched[p] > 0 && space.gaussian(p, i)) depth[p] = projected[i].key_depth;
 }
 
-// Cached frame, re-sort: every pair the key frame emitted keeps its tile if the footprint at
-// the current pose still touches it (the single-frame predicate); otherwise it is parked past
-// the grid (sorts last, no range covers it). Thread k moves the
-// pairs of the k-th nearest cached slot, so the tile sort leaves each list front to back with
+// Cached frame, re-sort: every pair the key frame emitted keeps its tile or is parked past the
+// grid (RekeyedTiles: sorts last, no range covers it). Thread k moves the pairs of the k-th
+// nearest cached slot, so the tile sort leaves each list front to back with
 // equal depths in slot order, as a full render does.
 template <typename T, typename Key>
 __global__ void rekey_kernel(ChunkSpace space, const std::uint64_t* touched, const std::uint32_t* order,
@@ -83,17 +82,10 @@ __global__ void rekey_kernel(ChunkSpace space, const std::uint64_t* touched, con
     std::uint64_t i = 0;
     const std::uint64_t count = touched[slot];
     if (count == 0 || !space.gaussian(slot, i)) return;
-    const std::uint32_t tiles = static_cast<std::uint32_t>(view.tiles_x) * view.tiles_y;
-    const Projected<T>& p = projected[i];
     const std::uint64_t from = emission_offset[slot], to = offsets[k];
-    // The key frame emitted these pairs row by row: each row's span is computed once.
-    TouchedTiles<T> footprint(p, culling, view);
-    // Exact culling shares one list among all tiles: nothing to filter.
-    const bool drawn = culling == Culling::exact || p.opacity > T(0);
+    RekeyedTiles<T> rekeyed(projected[i], culling, view);
     for (std::uint64_t j = 0; j < count; ++j) {
-        const std::uint32_t tile = emitted_tiles[from + j];
-        const bool keep = drawn && footprint.touches(tile);
-        keys[to + j] = static_cast<Key>(keep ? tile : parked_tile(tiles));
+        keys[to + j] = static_cast<Key>(rekeyed(emitted_tiles[from + j]));
         values[to + j] = static_cast<std::uint32_t>(i);
     }
 }

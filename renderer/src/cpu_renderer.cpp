@@ -369,22 +369,16 @@ void CpuRenderer<T>::keys(const Scene& scene, const Window& window, Culling cull
 // per-frame lists, in exact depth order, without preprocessing the scene again.
 template <typename T>
 void CpuRenderer<T>::rekey(const View<T>& view, Culling culling) {
-    const std::uint32_t tiles = static_cast<std::uint32_t>(view.tiles_x) * view.tiles_y;
     keys_.resize(emitted_keys_.size());
     values_ = emitted_values_;
     parallel_for(keys_.size(), kGaussianGrain * 16, threads_, [&](std::size_t begin, std::size_t end) {
-        // A Gaussian's pairs are consecutive, row by row: one TouchedTiles serves them all.
+        // A Gaussian's pairs are consecutive, row by row: one RekeyedTiles serves them all.
         for (std::size_t j = begin; j < end;) {
             const std::uint32_t gaussian = values_[j];
             const Projected<T>& p = projected_[gaussian];
-            TouchedTiles<T> footprint(p, culling, view);
-            // Exact culling shares one list among all tiles: nothing to filter.
-            const bool drawn = culling == Culling::exact || p.opacity > 0;
-            for (; j < end && values_[j] == gaussian; ++j) {
-                const std::uint32_t tile = key_tile(emitted_keys_[j]);
-                const bool keep = drawn && footprint.touches(tile);
-                keys_[j] = make_sort_key(keep ? tile : parked_tile(tiles), p.key_depth);
-            }
+            RekeyedTiles<T> rekeyed(p, culling, view);
+            for (; j < end && values_[j] == gaussian; ++j)
+                keys_[j] = make_sort_key(rekeyed(key_tile(emitted_keys_[j])), p.key_depth);
         }
     });
 }

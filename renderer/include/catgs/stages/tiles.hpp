@@ -11,6 +11,7 @@
 #include "catgs/math.hpp"
 #include "catgs/stages/culling.hpp"
 #include "catgs/stages/footprint.hpp"
+#include "catgs/stages/keys.hpp"
 #include "catgs/stages/project.hpp"
 #include "catgs/stages/view.hpp"
 
@@ -234,6 +235,30 @@ private:
     EllipseRows<T> rows_;
     int row_;  // the row span_ belongs to (-1: none yet)
     TileSpan span_;
+};
+
+/// A cached frame's re-key of one Gaussian's pairs, the same on both backends: a pair the key
+/// frame emitted keeps its tile while the footprint at the current pose touches it (the
+/// single-frame predicate) and is parked past the grid otherwise, as are all the pairs of a
+/// Gaussian culled at this pose. Exact culling shares one list among all tiles: nothing to
+/// filter. Ask about the pairs in their emission order (row by row): TouchedTiles keeps a row.
+template <typename T>
+class RekeyedTiles {
+public:
+    CATGS_HD RekeyedTiles(const Projected<T>& g, Culling mode, const View<T>& view)
+        : footprint_(g, mode, view),
+          drawn_(mode == Culling::exact || g.opacity > T(0)),
+          parked_(parked_tile(static_cast<std::uint32_t>(view.tiles_x) * view.tiles_y)) {}
+
+    /// The tile the pair emitted at `tile` sorts under at the current pose.
+    CATGS_HD std::uint32_t operator()(std::uint32_t tile) {
+        return drawn_ && footprint_.touches(tile) ? tile : parked_;
+    }
+
+private:
+    TouchedTiles<T> footprint_;
+    bool drawn_;
+    std::uint32_t parked_;
 };
 
 /// Does a single-frame footprint touch tile `tile`? (One question of TouchedTiles.)
