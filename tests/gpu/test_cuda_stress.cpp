@@ -294,6 +294,38 @@ TEST_F(CudaStressTest, NanOpacityAndFarOffScreenMeansDrawNothing) {
     }
 }
 
+// Two opaque Gaussians on one pixel centre, both at the alpha cap: T = (1 - 0.99)^2 ties the
+// 1e-4 stop in real arithmetic. With the cap at float's 0.99 (kMaxAlpha) the GPU, the CPU in
+// float and the double reference all stop before the far layer (test_cpu_renderer.cpp's
+// TwoCappedLayersStopBeforeTheSecond); drawing it would put 2 levels of its green there.
+TEST_F(CudaStressTest, TwoCappedLayersStopBeforeTheSecond) {
+    Camera cam = test::forward_camera(32, 32, 40);
+    cam.intrinsics.cx = 15.5;  // both centres project onto pixel (15, 15)'s centre
+    cam.intrinsics.cy = 15.5;
+    Scene scene = stress::empty_scene(0);
+    stress::Gaussian far, near;
+    far.position = {0, 0, 9};
+    far.scale = {0.5f, 0.5f, 0.5f};
+    far.opacity = 1.0f;
+    far.dc = {-2.0f, 1.5f, -2.0f};  // green
+    near.position = {0, 0, 4};
+    near.scale = {0.2f, 0.2f, 0.2f};
+    near.opacity = 1.0f;
+    near.dc = {1.5f, -2.0f, -2.0f};  // red
+    stress::add(scene, far);
+    stress::add(scene, near);
+    scene.update_bounds();
+    const ImageRGB8 ref = reference(scene, cam);
+    const std::size_t pixel = 3 * (15 * 32 + 15);
+    // Green: the background through the near layer's 1 - 0.99 (1 level); the far layer would make it 2.
+    EXPECT_EQ(ref.rgb[pixel + 1], quantize_8bit((1 - 0.99f) * kBackground[1])) << "the reference drew the far layer";
+    for (Culling culling : {Culling::exact, Culling::bbox3sigma, Culling::opacity_aware}) {
+        const Frame f = gpu_one(scene, cam, culling);
+        for (int c = 0; c < 3; ++c)
+            EXPECT_EQ(f.rgb8.rgb[pixel + c], ref.rgb[pixel + c]) << culling_name(culling) << ", channel " << c;
+    }
+}
+
 TEST_F(CudaStressTest, ExtremeShColoursKeepTheFloatImageFinite) {
     const Camera cam = test::forward_camera(48, 32, 60);
     for (float v : {1e38f, 3.4e38f, stress::kInf})
