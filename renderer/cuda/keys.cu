@@ -69,8 +69,8 @@ __global__ void rekey_depth_kernel(ChunkSpace space, const std::uint64_t* touche
 
 // Cached frame, re-sort: every pair the key frame emitted keeps its tile or is parked past the
 // grid (RekeyedTiles: sorts last, no range covers it). Thread k moves the pairs of the k-th
-// nearest cached slot, so the tile sort leaves each list front to back with
-// equal depths in slot order, as a full render does.
+// nearest cached slot, so the tile sort leaves each list front to back with equal depths in
+// slot order, as a full render does.
 template <typename T, typename Key>
 __global__ void rekey_kernel(ChunkSpace space, const std::uint64_t* touched, const std::uint32_t* order,
                              std::uint64_t ordered, const std::uint64_t* offsets, const std::uint64_t* emission_offset,
