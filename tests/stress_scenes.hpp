@@ -7,7 +7,8 @@
 // Every generator takes a seed, so a failure replays with CATGS_TEST_SEED (test_util.hpp),
 // and returns a StressCase: the scene, a short camera path (frame 0 is the single-frame
 // camera; all six frames are rendered for the speculative cache) and its family, which
-// selects the error bounds in the tests. The definitions are in stress_scenes.cpp.
+// selects the error bounds in the tests. The definitions are in stress_scenes.cpp (the
+// mixtures: stress_mixture_scenes.cpp; the targeted scenes: stress_targeted_scenes.cpp).
 #pragma once
 
 #include <array>
@@ -109,6 +110,12 @@ struct StressCase {
     Scene scene;
     std::vector<Camera> path;  ///< frame 0 is the single-frame camera
 };
+
+/// A case of `scene` (its bounds updated) on short_path() from `camera`.
+StressCase make_case(std::string name, Family family, Scene scene, const Camera& camera);
+
+/// The unit vector from the camera centre (the origin) towards `position`.
+std::array<double, 3> direction_to(const std::array<float, 3>& position);
 
 /// Default image of the family cases: small (CI), with a partial tile on each axis.
 inline constexpr int kCaseWidth = 72, kCaseHeight = 40;
