@@ -376,7 +376,7 @@ void CudaRenderer<T>::Impl::keys(const Frame<T>& f, TileRows rows, std::uint64_t
                                f.options->culling, f.guard, g.projected.data(), g.touched.data(),
                                buffers.depth.ranked_offsets.data(), buffers.depth.order(), buffers.depth.ranked,
                                keep ? g.emission_offset.data() : nullptr, rows, banded, f.reproject_actual, pairs,
-                               p.tile_keys(0), p.values[0].data()},
+                               p.tile_keys(0), p.values[0].data(), limits.keys_thread_pairs},
                    s);
         if (keep) {
             p.emitted_tiles.reserve(pairs, p.width, s);

@@ -70,6 +70,12 @@ inline constexpr double kCriticalListShare = 1.7;
 /// `pairs`, on a device that holds `resident_tasks` two-pixel tasks at once.
 RasterLayout choose_raster_layout(std::uint64_t longest_list, std::uint64_t pairs, std::uint64_t resident_tasks);
 
+/// A Gaussian with more pairs than this is emitted by its whole warp, a tile row a lane, not by
+/// its own thread: a lone thread writing a screen-filling Gaussian's thousands of pairs holds its
+/// warp long after the others are done. 64 measured best of 16, 64 and serial on the kit's 4K
+/// paths (keys 5-9% faster on city_ring and garden low, even on the garden survey; H100, s26).
+inline constexpr std::uint64_t kKeysThreadPairs = 64;
+
 struct CudaLimits {
     /// Most tile-Gaussian pairs one pass may hold; 0 = derive from free device memory at
     /// the first frame (a quarter of what is free, at 24 bytes a pair plus sort space).
@@ -79,6 +85,8 @@ struct CudaLimits {
     /// copy_out copies each band of rows as soon as its tiles are drawn, while the rest are;
     /// false waits for the whole pass (tests compare the two, and A/B runs measure them).
     bool overlap_copy = true;
+    /// kKeysThreadPairs; tests force 0 (every Gaussian by its warp) and the maximum (none).
+    std::uint64_t keys_thread_pairs = kKeysThreadPairs;
 };
 
 /// Host copies of the last frame's stage outputs, laid out as CpuRenderer's accessors are (partials

@@ -25,23 +25,63 @@ struct KeysShape<float, 1> {
     static constexpr int kThreads = 128, kMinBlocks = 7;
 };
 
+constexpr unsigned kFullWarp = 0xffffffffu;
+
+/// One Gaussian's pairs of the single-pose predicate (for_each_touched_tile), by the whole warp:
+/// lane r takes rows y0 + r, y0 + 32 + r, ...; a warp scan of the row widths puts each row
+/// where the serial loop puts it, so the pairs land in the same places (row by row).
+template <typename T, typename Key>
+__device__ void emit_rows_by_warp(const Projected<T>& g, std::uint32_t gaussian, Culling culling, const View<T>& view,
+                                  TileRows rows, std::uint64_t slot, std::uint64_t end, Key* keys,
+                                  std::uint32_t* values) {
+    const TileRect rect = tile_rect(g, culling, view.tiles_x, view.tiles_y);
+    const int y0 = rect.y0 > rows.begin ? rect.y0 : rows.begin;
+    const int y1 = rect.y1 < rows.end ? rect.y1 : rows.end;
+    const EllipseRows<T> ellipse(g, opacity_level(g.opacity));
+    const int lane = static_cast<int>(threadIdx.x % warpSize);
+    for (int base = y0; base < y1; base += warpSize) {  // uniform across the warp
+        const int ty = base + lane;
+        const TileSpan s = ty < y1 ? footprint_row(g, culling, rect, ty, view, T(0), ellipse) : TileSpan{0, 0};
+        const int width = s.x1 > s.x0 ? s.x1 - s.x0 : 0;
+        int through = width;  // inclusive scan of the widths
+        for (int d = 1; d < warpSize; d <<= 1) {
+            const int n = __shfl_up_sync(kFullWarp, through, d);
+            if (lane >= d) through += n;
+        }
+        const int total = __shfl_sync(kFullWarp, through, warpSize - 1);
+        std::uint64_t at = slot + static_cast<std::uint64_t>(through - width);
+        for (int tx = s.x0; tx < s.x1; ++tx, ++at)
+            if (at < end) {
+                keys[at] = static_cast<Key>(ty * view.tiles_x + tx);
+                values[at] = gaussian;
+            }
+        slot += static_cast<std::uint64_t>(total);
+    }
+}
+
 // Keys (tile ids) at each Gaussian's offset: thread k emits the k-th nearest slot, so the pairs
 // come out front to back, equal depths in slot order, and the stable sort by tile keeps that
-// order within each tile (sort.cuh). `capacity` bounds every write.
+// order within each tile (sort.cuh). `capacity` bounds every write. In the single-pose case a
+// Gaussian of more than `thread_pairs` pairs is emitted by its whole warp (KeysArgs), so every
+// lane reaches the ballot.
 template <typename T, int MaxWindow, typename Key>
 __global__ void __launch_bounds__(KeysShape<T, MaxWindow>::kThreads, KeysShape<T, MaxWindow>::kMinBlocks)
     keys_kernel(DeviceSceneView scene, ChunkSpace space, const View<T>* views, int window, Culling culling, T guard,
                 const Projected<T>* projected, const std::uint64_t* touched, const std::uint64_t* offsets,
                 const std::uint32_t* order, std::uint64_t ordered, std::uint64_t* emission_offset, TileRows rows,
-                bool band, bool reprojected, std::uint64_t capacity, Key* keys, std::uint32_t* values) {
+                bool band, bool reprojected, std::uint64_t capacity, Key* keys, std::uint32_t* values,
+                std::uint64_t thread_pairs) {
     const std::uint64_t k = static_cast<std::uint64_t>(blockIdx.x) * blockDim.x + threadIdx.x;
-    if (k >= ordered) return;
-    const std::uint64_t p = order[k];
-    std::uint64_t i = 0;
-    if (touched[p] == 0 || !space.gaussian(p, i)) return;
-    std::uint64_t slot = offsets[k];
-    if (emission_offset) emission_offset[p] = slot;
-    const std::uint64_t end = min(slot + touched[p], capacity);
+    std::uint64_t i = 0, count = 0, slot = 0;
+    if (k < ordered) {
+        const std::uint64_t p = order[k];
+        if (touched[p] != 0 && space.gaussian(p, i)) {
+            count = touched[p];
+            slot = offsets[k];
+            if (emission_offset) emission_offset[p] = slot;
+        }
+    }
+    const std::uint64_t end = min(slot + count, capacity);
     auto emit = [&](std::uint32_t tile) {
         if (slot < end) {
             keys[slot] = static_cast<Key>(tile);
@@ -49,11 +89,22 @@ __global__ void __launch_bounds__(KeysShape<T, MaxWindow>::kThreads, KeysShape<T
         }
         ++slot;
     };
-    if (band || (MaxWindow == 1 && !reprojected)) {
+    if (band || (MaxWindow == 1 && !reprojected)) {  // uniform across the launch
         // One pose whose geometry preprocess stored (bands: caching is off for them).
-        for_each_touched_tile(projected[i], culling, views[0], emit, rows);
+        // Exact culling emits one pair (tile 0) a Gaussian: never the warp's.
+        const bool by_warp = count > thread_pairs && culling != Culling::exact;
+        if (count > 0 && !by_warp) for_each_touched_tile(projected[i], culling, views[0], emit, rows);
+        for (unsigned many = __ballot_sync(kFullWarp, by_warp); many != 0; many &= many - 1) {
+            const int leader = __ffs(static_cast<int>(many)) - 1;
+            const std::uint64_t gaussian = __shfl_sync(kFullWarp, i, leader);
+            const std::uint64_t first = __shfl_sync(kFullWarp, slot, leader);
+            const std::uint64_t last = __shfl_sync(kFullWarp, end, leader);
+            emit_rows_by_warp(projected[gaussian], static_cast<std::uint32_t>(gaussian), culling, views[0], rows, first,
+                              last, keys, values);
+        }
         return;
     }
+    if (count == 0) return;
     Projected<T> poses[MaxWindow];
     const std::uint32_t valid = project_window<T, MaxWindow>(scene, i, views, window, poses);
     for_each_window_tile<MaxWindow>(poses, valid, window, culling, guard, views[0], emit, rows);
@@ -114,7 +165,7 @@ void keys(const KeysArgs<T>& a, cudaStream_t s) {
             kernel<<<blocks_for(a.ordered, threads), threads, 0, s>>>(
                 a.scene, a.space, a.views, a.window, a.culling, a.guard, a.projected, a.touched, a.offsets, a.order,
                 a.ordered, a.emission_offset, a.rows, a.band, a.reprojected, a.capacity, key_data<Key>(a.keys),
-                a.values);
+                a.values, a.thread_pairs);
         };
         if (a.window == 1)
             launch(keys_kernel<T, 1, Key>, KeysShape<T, 1>::kThreads);

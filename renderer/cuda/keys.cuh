@@ -43,6 +43,9 @@ struct KeysArgs {
     std::uint64_t capacity;  // bounds every write
     TileKeys keys;           // tile ids
     std::uint32_t* values;
+    /// One pose: a Gaussian with more pairs than this is emitted by its whole warp, a tile row a
+    /// lane, in the same slots (CudaLimits::keys_thread_pairs).
+    std::uint64_t thread_pairs;
 };
 
 template <typename T>

@@ -211,7 +211,10 @@ TEST_F(CudaStagesTest, DoubleStagesEqualTheCpuStages) {
             const View<double> view = make_view<double>(camera, scene.host.origin);
             const std::string what = "double " + c.name + " layout " + std::to_string(static_cast<int>(layout));
             Both<double> both;
-            both.gpu.set_limits(cuda::CudaLimits{0, layout});
+            cuda::CudaLimits limits{0, layout};
+            // The one-pixel runs emit every Gaussian's pairs by its warp; the two-pixel runs as shipped.
+            if (layout == cuda::RasterLayout::pixel_per_thread) limits.keys_thread_pairs = 0;
+            both.gpu.set_limits(limits);
             both.gpu.set_scene(scene.device);
             both.render(scene.host, camera, c.options);
             expect_identical_stages(both.cpu, both.stages, view, what);
@@ -223,9 +226,9 @@ TEST_F(CudaStagesTest, DoubleStagesEqualTheCpuStages) {
         }
 }
 
-// Footprints of hundreds of tiles and more tile rows than a warp has lanes (the regime where one
-// thread's emission holds its warp, and where any warp-shared emission would have to agree with
-// the host): the same pairs in the same order as the CPU's.
+// Footprints of hundreds of tiles and more tile rows than a warp has lanes (the regime where keys
+// hands a Gaussian's emission to its warp, a tile row a lane: kKeysThreadPairs): the same pairs in
+// the same order as the CPU's, as shipped and with every Gaussian emitted by its warp.
 TEST_F(CudaStagesTest, DoubleStagesEqualTheCpuStagesOnLargeFootprints) {
     const Camera camera = test::forward_camera(360, 1100, 75.0);
     test::RandomSceneParams p;
@@ -236,26 +239,31 @@ TEST_F(CudaStagesTest, DoubleStagesEqualTheCpuStagesOnLargeFootprints) {
     const Scene host = test::random_scene(test::fresh_seed("cuda stages large footprints"), p);
     const auto device = std::make_shared<cuda::DeviceScene>(host);
     const View<double> view = make_view<double>(camera, host.origin);
-    for (const Case& c : cases()) {
-        if (c.options.culling == Culling::exact) continue;  // one shared list: nothing per footprint
-        Both<double> both;
-        both.gpu.set_scene(device);
-        both.render(host, camera, c.options);
-        const std::string what = "double large footprints " + c.name;
-        expect_identical_stages(both.cpu, both.stages, view, what);
-        std::map<std::uint32_t, std::set<std::uint32_t>> rows_of;  // Gaussian -> its tile rows
-        std::map<std::uint32_t, std::size_t> tiles_of;
-        for (std::size_t i = 0; i < both.cpu.sorted_keys().size(); ++i) {
-            const std::uint32_t g = both.cpu.sorted_values()[i];
-            rows_of[g].insert(key_tile(both.cpu.sorted_keys()[i]) / static_cast<std::uint32_t>(view.tiles_x));
-            ++tiles_of[g];
+    for (const Case& c : cases())
+        for (const std::uint64_t thread_pairs : {cuda::kKeysThreadPairs, std::uint64_t{0}}) {
+            if (c.options.culling == Culling::exact) continue;  // one shared list: nothing per footprint
+            Both<double> both;
+            cuda::CudaLimits limits;
+            limits.keys_thread_pairs = thread_pairs;  // 0: every Gaussian's pairs by its warp
+            both.gpu.set_limits(limits);
+            both.gpu.set_scene(device);
+            both.render(host, camera, c.options);
+            const std::string what =
+                "double large footprints " + c.name + " keys_thread_pairs " + std::to_string(thread_pairs);
+            expect_identical_stages(both.cpu, both.stages, view, what);
+            std::map<std::uint32_t, std::set<std::uint32_t>> rows_of;  // Gaussian -> its tile rows
+            std::map<std::uint32_t, std::size_t> tiles_of;
+            for (std::size_t i = 0; i < both.cpu.sorted_keys().size(); ++i) {
+                const std::uint32_t g = both.cpu.sorted_values()[i];
+                rows_of[g].insert(key_tile(both.cpu.sorted_keys()[i]) / static_cast<std::uint32_t>(view.tiles_x));
+                ++tiles_of[g];
+            }
+            std::size_t large = 0, tall = 0;
+            for (const auto& [g, n] : tiles_of) large += n > 32;
+            for (const auto& [g, rows] : rows_of) tall += rows.size() > 32;
+            EXPECT_GT(large, 500u) << what << ": footprints of more than 32 tiles";
+            EXPECT_GT(tall, 10u) << what << ": footprints of more than 32 tile rows";
         }
-        std::size_t large = 0, tall = 0;
-        for (const auto& [g, n] : tiles_of) large += n > 32;
-        for (const auto& [g, rows] : rows_of) tall += rows.size() > 32;
-        EXPECT_GT(large, 500u) << what << ": footprints of more than 32 tiles";
-        EXPECT_GT(tall, 10u) << what << ": footprints of more than 32 tile rows";
-    }
 }
 
 // The pairs' tile ids are 16 bits wide up to 65535 tiles (whose parked id is 0xffff) and 32
