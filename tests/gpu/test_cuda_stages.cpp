@@ -239,9 +239,9 @@ TEST_F(CudaStagesTest, DoubleStagesEqualTheCpuStagesOnLargeFootprints) {
     const Scene host = test::random_scene(test::fresh_seed("cuda stages large footprints"), p);
     const auto device = std::make_shared<cuda::DeviceScene>(host);
     const View<double> view = make_view<double>(camera, host.origin);
-    for (const Case& c : cases())
+    for (const Case& c : cases()) {
+        if (c.options.culling == Culling::exact) continue;  // one shared list: nothing per footprint
         for (const std::uint64_t thread_pairs : {cuda::kKeysThreadPairs, std::uint64_t{0}}) {
-            if (c.options.culling == Culling::exact) continue;  // one shared list: nothing per footprint
             Both<double> both;
             cuda::CudaLimits limits;
             limits.keys_thread_pairs = thread_pairs;  // 0: every Gaussian's pairs by its warp
@@ -264,6 +264,7 @@ TEST_F(CudaStagesTest, DoubleStagesEqualTheCpuStagesOnLargeFootprints) {
             EXPECT_GT(large, 500u) << what << ": footprints of more than 32 tiles";
             EXPECT_GT(tall, 10u) << what << ": footprints of more than 32 tile rows";
         }
+    }
 }
 
 // The pairs' tile ids are 16 bits wide up to 65535 tiles (whose parked id is 0xffff) and 32
