@@ -12,6 +12,8 @@
 
 #include "catgs/cache.hpp"
 #include "catgs/cpu_renderer.hpp"
+#include "catgs/stages/blend.hpp"
+#include "catgs/stages/sh.hpp"
 #include "test_util.hpp"
 
 namespace catgs::test::stress {
@@ -43,8 +45,8 @@ std::size_t count_nonfinite(const ImageF& image) {
         std::count_if(image.rgb.begin(), image.rgb.end(), [](float v) { return !std::isfinite(v); }));
 }
 
-void Measured::add(const Frame& f, const Reference& reference) {
-    const ImageError e = compare(f.rgb8, reference.target_for(f.rgb8));
+void Measured::add(const Frame& f, const Reference& reference, bool split) {
+    const ImageError e = compare(f.rgb8, reference.target_for(f.rgb8, split));
     ill_conditioned += reference.ill_conditioned_count();
     max_abs = std::max(max_abs, e.max_abs);
     min_psnr = std::min(min_psnr, e.psnr);
@@ -130,12 +132,31 @@ std::size_t Reference::ill_conditioned_count() const {
     return n;
 }
 
-ImageRGB8 Reference::target_for(const ImageRGB8& image) const {
+ImageRGB8 Reference::target_for(const ImageRGB8& image, bool split) const {
     ImageRGB8 target = exact.rgb8;
     if (image.rgb.size() != target.rgb.size()) return target;  // compare() reports the sizes
+    const ImageRGB8& lo = split ? split_low : low;
+    const ImageRGB8& hi = split ? split_high : high;
     for (std::size_t i = 0; i < target.rgb.size(); ++i)
-        if (ill_conditioned(i)) target.rgb[i] = std::clamp(image.rgb[i], low.rgb[i], high.rgb[i]);
+        if (hi.rgb[i] - lo.rgb[i] > 1) target.rgb[i] = std::clamp(image.rgb[i], lo.rgb[i], hi.rgb[i]);
     return target;
+}
+
+double largest_colour(const Scene& scene, const Camera& camera) {
+    const std::array<double, 3> world = camera_centre(camera.pose);
+    const Vec3<double> centre{world[0] - scene.origin[0], world[1] - scene.origin[1], world[2] - scene.origin[2]};
+    const std::size_t stride = 3u * static_cast<std::size_t>(scene.sh_coefficients());
+    double largest = 0;
+    for (std::size_t g = 0; g < scene.count(); ++g) {
+        Vec3<double> dir{scene.positions[3 * g] - centre.x, scene.positions[3 * g + 1] - centre.y,
+                         scene.positions[3 * g + 2] - centre.z};
+        const double norm = std::sqrt(dir.x * dir.x + dir.y * dir.y + dir.z * dir.z);
+        dir = norm > 0 && std::isfinite(norm) ? Vec3<double>{dir.x / norm, dir.y / norm, dir.z / norm}
+                                              : Vec3<double>{0, 0, 1};
+        const Vec3<double> c = sh_colour(scene.sh.data() + g * stride, scene.sh_degree, dir);
+        largest = std::max({largest, c.x, c.y, c.z});
+    }
+    return largest;
 }
 
 namespace {
@@ -147,6 +168,27 @@ Scene with_opacities_scaled(const Scene& scene, double factor) {
     return s;
 }
 
+/// Widens r.split_low / split_high (copies of low / high) by the split's range (Reference)
+/// wherever the exact blend stopped.
+void widen_for_split(Reference& r, const Scene& scene, const Camera& camera) {
+    CpuRenderer<double> renderer;
+    PartialImage partial;
+    renderer.render_partial(scene, camera, options_for(Culling::exact, Mode::plain), partial);
+    // Margins for SH evaluated in another precision or along a slightly different direction.
+    const double c_max = largest_colour(scene, camera) * (1 + 1e-3);
+    for (std::size_t p = 0; p < partial.stopped.size(); ++p) {
+        if (!partial.stopped[p]) continue;
+        const double t_stop = partial.transmittance[p];
+        for (std::size_t ch = 0; ch < 3; ++ch) {
+            const std::size_t i = 3 * p + ch;
+            const double value = r.exact.image.rgb[i], bg = kBackground[ch];
+            r.split_low.rgb[i] = std::min(r.split_low.rgb[i], quantize_8bit(value - t_stop * bg));
+            r.split_high.rgb[i] =
+                std::max(r.split_high.rgb[i], quantize_8bit(value + t_stop * std::max(0.0, c_max - bg)));
+        }
+    }
+}
+
 }  // namespace
 
 std::vector<Reference> reference_frames(const StressCase& c) {
@@ -154,7 +196,7 @@ std::vector<Reference> reference_frames(const StressCase& c) {
     const Scene denser = with_opacities_scaled(c.scene, 1 + kConditioningOpacity);
     std::vector<Reference> out;
     for (const Camera& cam : c.path) {
-        Reference r{reference_frame(c.scene, cam), {}, {}};
+        Reference r{reference_frame(c.scene, cam), {}, {}, {}, {}};
         r.low = r.high = r.exact.rgb8;
         for (const Scene* probe : {&fainter, &denser}) {
             const ImageRGB8 moved = reference_frame(*probe, cam).rgb8;
@@ -163,16 +205,20 @@ std::vector<Reference> reference_frames(const StressCase& c) {
                 r.high.rgb[i] = std::max(r.high.rgb[i], moved.rgb[i]);
             }
         }
+        r.split_low = r.low;
+        r.split_high = r.high;
+        widen_for_split(r, c.scene, cam);
         out.push_back(std::move(r));
     }
     return out;
 }
 
-Measured measure(const Backend& backend, const std::vector<Frame>& frames, const std::vector<Reference>& reference) {
+Measured measure(const Backend& backend, const std::vector<Frame>& frames, const std::vector<Reference>& reference,
+                 bool split) {
     Measured m;
     m.rgb8_checked = backend.writes_rgb8();
     for (std::size_t k = 0; k < frames.size(); ++k) {
-        m.add(frames[k], reference[k]);
+        m.add(frames[k], reference[k], split);
         if (!m.rgb8_checked) continue;
         const ImageRGB8 q = to_rgb8(frames[k].image);
         for (std::size_t i = 0; i < q.rgb.size() && i < frames[k].rgb8.rgb.size(); ++i)
@@ -191,7 +237,7 @@ Classes check_case(const Backend& backend, const StressCase& c, const std::strin
     Classes classes;
     for (const Config& cfg : backend.configs()) {
         const std::vector<Frame> frames = backend.render(c, cfg);
-        const Measured m = measure(backend, frames, reference);
+        const Measured m = measure(backend, frames, reference, cfg.mode == Mode::split);
         classes[backend.class_label(cfg)].merge(m);
         const std::string what = c.name + ", " + backend.config_name(cfg) + ": " + describe(m) + " " + note;
         expect_within(m, backend.bound_for(c.family, cfg), small_image, what);
@@ -274,7 +320,7 @@ void measure_bounds(const Backend& backend) {
             const std::vector<Reference> reference = reference_frames(c);
             const std::string family = family_name(c.family);
             for (const Config& cfg : backend.configs()) {
-                Measured m = measure(backend, backend.render(c, cfg), reference);
+                Measured m = measure(backend, backend.render(c, cfg), reference, cfg.mode == Mode::split);
                 for (const Reference& r : reference) m.nonfinite += count_nonfinite(r.exact.image);
                 worst[family + " " + backend.class_label(cfg)].merge(m);
                 worst[family + " / " + backend.config_name(cfg)].merge(m);

@@ -324,6 +324,61 @@ TEST(StressReference, ABrightGaussianOnTheAlphaThresholdIsIllConditionedAnOrdina
     EXPECT_EQ(compare(render, bright.target_for(render)).max_abs, 0);
 }
 
+/// Ten screen-filling Gaussians stacked in depth in front of a 33 x 33 camera, every tile's
+/// list 10 long, so that a split of k = 8 (stress::kSplitK) blends entries 1-2 as the first
+/// sub-task and 3-10 as the second. At the centre pixel entries 1-2 (opacity 0.93) leave
+/// T = 0.0049 and entry 3 (alpha 0.99, colour `third`) would take it to 4.9e-5: the plain blend
+/// stops before entry 3, while the second sub-task, blending from T = 1, draws it. At the
+/// corner pixel the footprints are fainter and entries 4-10 (opacity 0.2) leave T = 3.5e-4:
+/// no stop there.
+StressCase stop_inside_a_later_subtask(float third) {
+    StressCase c{"stop", Family::hdr_mixture, {}, {test::forward_camera(33, 33, 60)}};
+    const auto dc_of = [](float colour) { return static_cast<float>((colour - kShColourOffset) / kShC0); };
+    for (int i = 0; i < 10; ++i) {
+        stress::Gaussian g;
+        g.position = {0, 0, 5.0f + 0.1f * static_cast<float>(i)};
+        g.scale = {10, 10, 10};
+        g.opacity = i < 2 ? 0.93f : i == 2 ? 1.0f : 0.2f;
+        const float colour = i == 2 ? third : 0.5f;
+        g.dc = {dc_of(colour), dc_of(colour), dc_of(colour)};
+        stress::add(c.scene, g);
+    }
+    c.scene.update_bounds();
+    return c;
+}
+
+TEST(StressReference, ASplitRenderIsHeldToTheRangeOfWhatItDrawsPastTheStop) {
+    const std::size_t centre = 3 * (16 * 33 + 16);
+    const StressCase bright_case = stop_inside_a_later_subtask(1e4f);
+    const stress::Reference bright = stress::reference_frames(bright_case)[0];
+    const ImageRGB8 split = render_frames<double>(bright_case, Culling::exact, Mode::split)[0].rgb8;
+    // The split draws entry 3's colour 1e4 at weight 0.0049 x 0.99: the pixel saturates where
+    // the plain blend is dark.
+    EXPECT_LT(bright.exact.rgb8.rgb[centre], 150);
+    EXPECT_EQ(split.rgb[centre], 255);
+    EXPECT_FALSE(bright.ill_conditioned(centre));
+    EXPECT_EQ(bright.split_high.rgb[centre], 255);
+    EXPECT_GT(compare(split, bright.target_for(split)).max_abs, 100);
+    EXPECT_EQ(compare(split, bright.target_for(split, /*split=*/true)).max_abs, 0);
+    // The corner pixel's blend does not stop (the footprints are fainter there): no range.
+    EXPECT_EQ(bright.split_low.rgb[0], bright.exact.rgb8.rgb[0]);
+    EXPECT_EQ(bright.split_high.rgb[0], bright.exact.rgb8.rgb[0]);
+    // Darker than the plain blend can go is still an error.
+    ImageRGB8 dark = split;
+    dark.rgb[centre] = static_cast<std::uint8_t>(bright.split_low.rgb[centre] - 5);
+    EXPECT_EQ(compare(dark, bright.target_for(dark, true)).max_abs, 5);
+
+    // An ordinary colour moves the stopped pixel by T_stop x (1 - background) < 1.3 levels.
+    const StressCase ordinary_case = stop_inside_a_later_subtask(1.0f);
+    const stress::Reference ordinary = stress::reference_frames(ordinary_case)[0];
+    const ImageRGB8 ordinary_split = render_frames<double>(ordinary_case, Culling::exact, Mode::split)[0].rgb8;
+    for (std::size_t ch = 0; ch < 3; ++ch) {
+        EXPECT_LE(ordinary.split_high.rgb[centre + ch] - ordinary.split_low.rgb[centre + ch], 2) << ch;
+        EXPECT_GE(ordinary_split.rgb[centre + ch], ordinary.split_low.rgb[centre + ch]) << ch;
+        EXPECT_LE(ordinary_split.rgb[centre + ch], ordinary.split_high.rgb[centre + ch]) << ch;
+    }
+}
+
 // --- 8192 x 8192 ----------------------------------------------------------------------
 
 /// The largest image of the issue, on the CPU: float, opacity-aware culling, a dozen
