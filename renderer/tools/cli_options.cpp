@@ -73,7 +73,8 @@ void add_pipeline_flags(CLI::App& app, PipelineFlags& f) {
            "paths where splitting measures faster)")
         ->capture_default_str();
     app.add_option("--split-tail", f.split_tail,
-                   "early-termination transmittance of split sub-tasks after the first (1e-4 = exact)")
+                   "early-termination transmittance of split sub-tasks after the first (1e-4: the unsplit "
+                   "threshold; higher is the paper's faster, lossier setting)")
         ->capture_default_str();
     app.add_option("--cache", f.cache,
                    "inter-frame cache: off, speculative (CaT-GS), or unspeculated (shows the artifacts)")
