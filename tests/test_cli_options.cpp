@@ -6,6 +6,7 @@
 #include <tuple>
 
 #include "catgs/common/command_line.hpp"
+#include "catgs/error.hpp"
 #include "catgs/parallel.hpp"
 #include "catgs/render_options.hpp"
 #include "cli_options.hpp"
@@ -173,6 +174,31 @@ TEST(CliOptions, BoundedNumbersRefuseNanAndNameTheUnit) {
             EXPECT_EQ(std::string(e.what()),
                       std::string("--rate: expected poses per second in [0, 1000], not ") + value);
         }
+    }
+}
+
+// --occlusion-cut: on in the defaults the tools start from, off when asked, and any other word
+// is refused naming the flag and the words it takes.
+TEST(CliOptions, OcclusionCutTakesOnOrOff) {
+    const auto apply = [](const std::string& args) {
+        CLI::App app{"test"};
+        catgs::cli::PipelineFlags flags;
+        catgs::cli::add_pipeline_flags(app, flags);
+        app.parse(args, false);
+        catgs::RenderOptions options;
+        catgs::cli::apply_pipeline_flags(flags, options);
+        return options;
+    };
+    EXPECT_TRUE(apply("").catgs.occlusion_cut);
+    EXPECT_NE(catgs::cli::describe_pipeline(apply("")).find("occlusion cut"), std::string::npos);
+    EXPECT_FALSE(apply("--occlusion-cut off").catgs.occlusion_cut);
+    EXPECT_EQ(catgs::cli::describe_pipeline(apply("--occlusion-cut off")).find("occlusion cut"), std::string::npos);
+    EXPECT_TRUE(apply("--occlusion-cut on").catgs.occlusion_cut);
+    try {
+        apply("--occlusion-cut yes");
+        FAIL() << "yes accepted";
+    } catch (const catgs::Error& e) {
+        EXPECT_EQ(std::string(e.what()), "--occlusion-cut 'yes': expected on or off");
     }
 }
 

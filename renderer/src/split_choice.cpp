@@ -25,13 +25,16 @@ bool SplitChooser::choose(const CatgsOptions& options) {
 }
 
 void SplitChooser::learn(bool split, const FrameStats& stats) {
-    if (!measured_ || stats.pairs == 0) return;
+    // Per pair of the full lists: a frame under the occlusion cut draws the same tiles from
+    // shorter lists (the pairs it left out lay behind every pixel's stop) in about the same time.
+    const std::uint64_t pairs = stats.pairs + stats.occluded_pairs;
+    if (!measured_ || pairs == 0) return;
     // copy_out too: the bands of tile rows it copies while the frame is drawn wait for merge
     // wherever a tile of theirs was split, so splitting also shows as exposed copy time.
     const double ms = stats.stage_ms[Stage::rasterize] + stats.stage_ms[Stage::merge] + stats.stage_ms[Stage::copy_out];
     if (!(ms > 0)) return;
     (split ? split_ : whole_)
-        .add(ms * 1e6 / static_cast<double>(stats.pairs), decisions_, probing_ ? kSplitProbeWeight : kSplitCostWeight);
+        .add(ms * 1e6 / static_cast<double>(pairs), decisions_, probing_ ? kSplitProbeWeight : kSplitCostWeight);
 }
 
 }  // namespace catgs

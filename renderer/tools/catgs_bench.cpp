@@ -93,8 +93,8 @@ struct Result {
     std::string name, pipeline;
     std::array<Series, kRenderStages> stages;
     Series total, pairs, visible, chunks_culled, arena, key_total, cached_total, window, splits, psnr, max_abs,
-        over_one;
-    std::uint64_t chunks = 0;
+        over_one, occluded_pairs;
+    std::uint64_t chunks = 0, occlusion_redrawn = 0;
     nlohmann::json frames = nlohmann::json::array();
 };
 
@@ -170,6 +170,8 @@ Result run_config(catgs::Renderer& renderer, const std::vector<catgs::Camera>& c
         r.arena.values.push_back(static_cast<double>(s.arena_bytes));
         r.window.values.push_back(s.window);
         r.splits.values.push_back(static_cast<double>(s.split_tasks));
+        r.occluded_pairs.values.push_back(static_cast<double>(s.occluded_pairs));
+        r.occlusion_redrawn += s.occlusion_redrawn;
         (s.key_frame ? r.key_total : r.cached_total).values.push_back(s.total_ms);
         nlohmann::json frame{{"frame", f},
                              {"key_frame", s.key_frame},
@@ -184,7 +186,10 @@ Result run_config(catgs::Renderer& renderer, const std::vector<catgs::Camera>& c
                              {"longest_list", s.longest_list},
                              {"split_k", s.split_k},
                              {"chunks", s.chunks},
-                             {"chunks_culled", s.chunks_culled}};
+                             {"chunks_culled", s.chunks_culled},
+                             {"occluded", s.occluded},
+                             {"occluded_pairs", s.occluded_pairs},
+                             {"occlusion_redrawn", s.occlusion_redrawn}};
         for (std::size_t k = 0; k < kRenderStages; ++k) frame[stage_key(catgs::kStages[k])] = s.stage_ms.ms[k];
         frame["total_ms"] = s.total_ms;
         // The bench kit (shared/bench-kit/summarize.py) reads the copy-out time by its old name.
@@ -230,8 +235,10 @@ void print_detail(const Result& r) {
     if (r.chunks > 0) row("chunks culled", r.chunks_culled, 1.0, "%-13s %10.0f %10.0f %10.0f\n");
     row("window", r.window, 1.0, "%-13s %10.0f %10.0f %10.0f\n");
     row("split tasks", r.splits, 1.0, "%-13s %10.0f %10.0f %10.0f\n");
+    row("occluded prs", r.occluded_pairs, 1.0, "%-13s %10.0f %10.0f %10.0f\n");
     row("arena MiB", r.arena, 1.0 / 1048576.0, "%-13s %10.1f %10.1f %10.1f\n");
-    std::printf("key frames %zu, cached frames %zu", r.key_total.values.size(), r.cached_total.values.size());
+    std::printf("key frames %zu, cached frames %zu, redrawn past the occlusion cut %llu", r.key_total.values.size(),
+                r.cached_total.values.size(), static_cast<unsigned long long>(r.occlusion_redrawn));
     if (!r.psnr.values.empty())
         std::printf("; error on %zu frames: PSNR mean %.2f worst %.2f dB, max %0.f levels, >1 level %.5f%%",
                     r.psnr.values.size(), r.psnr.mean(), r.psnr.min(), r.max_abs.max(), 100.0 * r.over_one.max());
@@ -283,6 +290,8 @@ nlohmann::json result_json(const Result& r) {
             {"chunks_culled", stats_json(r.chunks_culled)},
             {"window", stats_json(r.window)},
             {"split_tasks", stats_json(r.splits)},
+            {"occluded_pairs", stats_json(r.occluded_pairs)},
+            {"occlusion_redrawn", r.occlusion_redrawn},
             {"peak_arena_bytes", r.arena.max()},
             {"psnr_mean", r.psnr.mean()},
             {"psnr_worst", r.psnr.min()},

@@ -80,7 +80,9 @@ nlohmann::json frame_json(std::size_t i, const std::string& file, const catgs::F
                          {"key_frame", s.key_frame},
                          {"window", s.window},
                          {"split_tasks", s.split_tasks},
-                         {"longest_list", s.longest_list}};
+                         {"longest_list", s.longest_list},
+                         {"occluded", s.occluded},
+                         {"occlusion_redrawn", s.occlusion_redrawn}};
     for (catgs::Stage stage : catgs::kStages)
         if (stage != catgs::Stage::encode) frame[std::string(catgs::stage_name(stage)) + "_ms"] = s.stage_ms[stage];
     if (sharded) {

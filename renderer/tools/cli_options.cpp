@@ -30,7 +30,8 @@ PipelineFlags::PipelineFlags(const RenderOptions& o)
       guard_m(o.catgs.guard_translation),
       resort(o.catgs.resort_cached ? "on" : "off"),
       chunks(o.chunk_culling ? "on" : "off"),
-      reuse_order_max_deg(angle_name(o.catgs.reuse_order_max_angle)) {}
+      reuse_order_max_deg(angle_name(o.catgs.reuse_order_max_angle)),
+      occlusion_cut(o.catgs.occlusion_cut ? "on" : "off") {}
 
 std::string PipelineFlags::angle_name(double radians) {
     if (!std::isfinite(radians)) return "any";
@@ -102,6 +103,11 @@ void add_pipeline_flags(CLI::App& app, PipelineFlags& f) {
                    "chunk-level culling: skip the scene's spatial chunks that no pose can see (on or off; exact "
                    "culling never skips)")
         ->capture_default_str();
+    app.add_option("--occlusion-cut", f.occlusion_cut,
+                   "plain frames leave out the Gaussians behind where the last frame's tiles turned opaque, check "
+                   "every tile and draw the frame again in full where one did not (on or off; the image is the same; "
+                   "CUDA float renders)")
+        ->capture_default_str();
 }
 
 void apply_pipeline_flags(const PipelineFlags& f, RenderOptions& options) {
@@ -154,6 +160,9 @@ void apply_pipeline_flags(const PipelineFlags& f, RenderOptions& options) {
     }
     if (f.chunks != "on" && f.chunks != "off") throw Error("--chunks '" + f.chunks + "': expected on or off");
     options.chunk_culling = f.chunks == "on";
+    if (f.occlusion_cut != "on" && f.occlusion_cut != "off")
+        throw Error("--occlusion-cut '" + f.occlusion_cut + "': expected on or off");
+    c.occlusion_cut = f.occlusion_cut == "on";
 }
 
 std::string describe_pipeline(const RenderOptions& o) {
@@ -171,6 +180,7 @@ std::string describe_pipeline(const RenderOptions& o) {
                        readable_degrees(PipelineFlags::angle_name(c.reuse_order_max_angle), " deg")
                  : ", depth order reused";
     if (!o.chunk_culling) s += ", no chunk culling";
+    if (o.catgs.occlusion_cut) s += ", occlusion cut";
     return s;
 }
 

@@ -26,7 +26,7 @@ struct PipelineFlags {
     int window_start;
     std::string window_cost;
     double guard_px, guard_m;
-    std::string resort, chunks, reuse_order_max_deg;
+    std::string resort, chunks, reuse_order_max_deg, occlusion_cut;
 
     /// Degrees as the flag shows them; "any" for no limit.
     static std::string angle_name(double radians);

@@ -74,6 +74,11 @@ struct CatgsOptions {
     /// that the plans of tests and code that set their own options do not depend on timing;
     /// default_pipeline_options() measures time.
     WindowCost window_cost = WindowCost::off;
+    /// Occlusion cut (stages/occlusion.hpp, CUDA float renders): a plain frame leaves out the
+    /// Gaussians behind where the last frame's tiles turned opaque, checks every tile, and draws
+    /// itself again without the cut where one did not turn opaque in front of it, so the image
+    /// is the full lists' either way. Off here, on in default_pipeline_options().
+    bool occlusion_cut = false;
 };
 
 /// Lists this many entries long or shorter are never split by the automatic k.

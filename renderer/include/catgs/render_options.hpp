@@ -64,6 +64,7 @@ inline RenderOptions default_pipeline_options() {
     o.catgs.reuse_order_max_angle = kDefaultReuseOrderMaxAngle;
     o.catgs.split_k = kDefaultSplitK;
     o.catgs.guard_px = kDefaultGuardPx;
+    o.catgs.occlusion_cut = true;
     return o;
 }
 
@@ -89,6 +90,12 @@ struct FrameStats {
     std::uint32_t split_k = 0;        ///< the k used this frame (0: no splitting)
     /// The most pairs one tile's list holds (exact culling: the one shared list).
     std::uint64_t longest_list = 0;
+    /// Occlusion cut (CatgsOptions::occlusion_cut): Gaussians left out of the lists behind the
+    /// predicted cut, the pairs they would have had, and whether a tile missed so that the frame
+    /// was drawn a second time without it (its stage times are both passes').
+    std::uint64_t occluded = 0;
+    std::uint64_t occluded_pairs = 0;
+    bool occlusion_redrawn = false;
     /// Wall time of each stage (stage.hpp). The CPU backend folds scan into keys and has no
     /// copy_out; encode is the server's.
     StageTimes stage_ms;
