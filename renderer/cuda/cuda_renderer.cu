@@ -98,6 +98,7 @@ void CudaRenderer<T>::set_scene(std::shared_ptr<const DeviceScene> scene) {
 template <typename T>
 void CudaRenderer<T>::reset_cache() {
     impl_->planner.reset();
+    impl_->occlusion.reset();
 }
 
 template <typename T>
@@ -145,6 +146,39 @@ FrameStats CudaRenderer<T>::Impl::render(const Camera& camera, const RenderOptio
     Frame<T> f = plan_frame(camera, options, hints);
     // A partial frame stops before the background: with zero, C + T * background is C.
     if (out.any_partial()) f.background = Vec3<T>{T(0), T(0), T(0)};
+    plan_occlusion(f, camera, out);
+    const Frame<T> planned = f;
+    FrameStats stats = draw(f, out);
+    const bool missed = f.occlusion && host.counters.data()->tasks.occlusion_misses > 0;
+    if (missed) {
+        // A tile did not turn opaque in front of the cut: the frame again with every Gaussian,
+        // timed as both passes, since both were spent on it.
+        const FrameStats cut_pass = stats;
+        f = planned;
+        f.occlusion = false;
+        stats = draw(f, out);
+        for (std::size_t s = 0; s < kStageCount; ++s) stats.stage_ms.ms[s] += cut_pass.stage_ms.ms[s];
+        stats.total_ms = stats.stage_ms.sum();
+        stats.occluded = cut_pass.occluded;
+        stats.occluded_pairs = cut_pass.occluded_pairs;
+        stats.occlusion_redrawn = true;
+    }
+    occlusion_rendered(f, camera, missed);
+    if (f.plan.key) key_rendered(f, host.counters.data()->frame);
+    last = LastFrame{true,
+                     f.total,
+                     f.tiles,
+                     max_extra_tasks(f, f.total),
+                     f.shared_list,
+                     f.split_used,
+                     f.bands.size() > 1,
+                     host.counters.data()->tasks};
+    planner.frame_rendered(f.plan, stats);
+    return stats;
+}
+
+template <typename T>
+FrameStats CudaRenderer<T>::Impl::draw(Frame<T>& f, const HostOutputs& out) {
     begin_frame(f, out);
     if (f.plan.key) {
         chunk_cull(f);
@@ -185,18 +219,7 @@ FrameStats CudaRenderer<T>::Impl::render(const Camera& camera, const RenderOptio
     }
     if (!f.plan.key) add_cached_list_times();
     copy_out(f, out);
-    if (f.plan.key) key_rendered(f, host.counters.data()->frame);
-    last = LastFrame{true,
-                     f.total,
-                     f.tiles,
-                     max_extra_tasks(f, f.total),
-                     f.shared_list,
-                     f.split_used,
-                     f.bands.size() > 1,
-                     host.counters.data()->tasks};
-    const FrameStats stats = frame_stats(f);
-    planner.frame_rendered(f.plan, stats);
-    return stats;
+    return frame_stats(f);
 }
 
 template <typename T>
@@ -244,6 +267,10 @@ void CudaRenderer<T>::Impl::begin_frame(const Frame<T>& f, const HostOutputs& ou
     t.range_end.reserve(f.tiles, s);
     t.split_slot.reserve(f.tiles, s);
     t.split_tiles.reserve(f.tiles, s);
+    OcclusionBuffers& o = buffers.occlusion;
+    if (f.record_occlusion)
+        for (DeviceArray<float>& r : o.recorded) r.reserve(f.tiles, s);  // the last frame's, if any, stay
+    if (f.occlusion) o.pyramid.reserve(occlusion_pyramid(f.view.tiles_x, f.view.tiles_y).cells, s);
     PixelBuffers<T>& p = buffers.pixels;
     if (out.rgb8) p.image_rgb8.reserve(3 * f.pixels, s);
     if (out.rgb || out.any_partial()) p.image_float.reserve(3 * f.pixels, s);
@@ -260,6 +287,7 @@ void CudaRenderer<T>::Impl::begin_frame(const Frame<T>& f, const HostOutputs& ou
     CATGS_CUDA_CHECK(cudaMemsetAsync(copy.tiles_drawn, 0, kMaxCopyBands * sizeof(unsigned int), s));
     // ranges resets the other task counters per band (and a cached frame keeps its key frame's).
     CATGS_CUDA_CHECK(cudaMemsetAsync(&task_counters()->longest_list, 0, sizeof(TaskCounters::longest_list), s));
+    CATGS_CUDA_CHECK(cudaMemsetAsync(&task_counters()->occlusion_misses, 0, sizeof(TaskCounters::occlusion_misses), s));
     const unsigned int far_bits = 0x7f800000u;  // +inf: the atomicMin start of the nearest depth
     CATGS_CUDA_CHECK(
         cudaMemcpyAsync(&frame_counters()->min_depth_bits, &far_bits, sizeof(far_bits), cudaMemcpyHostToDevice, s));
@@ -299,11 +327,18 @@ void CudaRenderer<T>::Impl::chunk_cull(Frame<T>& f) {
 template <typename T>
 void CudaRenderer<T>::Impl::preprocess(Frame<T>& f) {
     GaussianBuffers<T>& g = buffers.gaussians;
-    cuda::preprocess(PreprocessArgs<T>{f.scene, key_space, buffers.window.views.data(),
-                                       static_cast<int>(f.plan.poses.size()), f.view, f.reproject_actual,
-                                       f.options->culling, f.guard, f.guard_translation, f.cache != CacheMode::off,
-                                       g.projected.data(), g.touched.data(), g.sort_depth.data(), frame_counters()},
-                     stream);
+    OcclusionCut cut;
+    if (f.occlusion) {
+        OcclusionBuffers& o = buffers.occlusion;
+        cut = OcclusionCut{o.pyramid.data(), occlusion_pyramid(f.view.tiles_x, f.view.tiles_y)};
+        predict_occlusion(o.last_records(), cut.pyramid, f.occlusion_motion, o.pyramid.data(), stream);
+    }
+    cuda::preprocess(
+        PreprocessArgs<T>{f.scene, key_space, buffers.window.views.data(), static_cast<int>(f.plan.poses.size()),
+                          f.view, f.reproject_actual, f.options->culling, f.guard, f.guard_translation,
+                          f.cache != CacheMode::off, g.projected.data(), g.touched.data(), g.sort_depth.data(),
+                          frame_counters(), cut},
+        stream);
     events.record(Event::preprocess, stream);
 }
 
@@ -502,7 +537,9 @@ void CudaRenderer<T>::Impl::rasterize(const Frame<T>& f, TileRows rows, std::uin
         RasterizeArgs<T>{grid, band_tiles + max_extra, raster_layout(), t.range_begin.data(), t.range_end.data(),
                          t.split_slot.data(), t.labels.data(), task_counters(),
                          buffers.pairs.values[buffers.pairs.current].data(), buffers.gaussians.projected.data(), f.view,
-                         f.background, f.tail, buffers.pixels.partials.data(), out},
+                         f.background, f.tail, buffers.pixels.partials.data(), out,
+                         f.occlusion ? buffers.occlusion.pyramid.data() : nullptr,
+                         f.record_occlusion ? buffers.occlusion.this_frame_records() : nullptr},
         stream);
     events.record(Event::rasterize, stream);
 }
@@ -567,6 +604,8 @@ FrameStats CudaRenderer<T>::Impl::frame_stats(const Frame<T>& f) const {
     stats.split_tasks = f.split_used ? tc.extra_tasks : 0;
     stats.tasks = f.tiles + stats.split_tasks;
     stats.longest_list = tc.longest_list;
+    stats.occluded = f.occlusion ? c.occluded : 0;
+    stats.occluded_pairs = f.occlusion ? c.occluded_pairs : 0;
     events.write(stats.stage_ms);
     stats.total_ms = stats.stage_ms.sum();
     stats.arena_bytes = buffers.bytes();

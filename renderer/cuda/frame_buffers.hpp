@@ -17,6 +17,7 @@
 #include "cuda_check.hpp"
 #include "device_buffer.hpp"
 #include "kernel_common.cuh"
+#include "occlusion.cuh"
 #include "tile_key.cuh"
 
 namespace catgs::cuda {
@@ -156,10 +157,11 @@ struct FrameBuffers {
     PairBuffers pairs;
     TileBuffers tiles;
     PixelBuffers<T> pixels;
+    OcclusionBuffers occlusion;  // per tile, across frames
 
     std::size_t bytes() const {
         return window.bytes() + chunks.bytes() + gaussians.bytes() + depth.bytes() + pairs.bytes() + tiles.bytes() +
-               pixels.bytes();
+               pixels.bytes() + occlusion.bytes();
     }
 };
 

@@ -50,10 +50,12 @@ struct DeviceSceneView {
 /// every frame; the task part belongs to the task list, which cached frames reuse from their
 /// key frame, so only a key frame's split pass resets it.
 struct FrameCounters {
-    unsigned long long visible;    // Gaussians with tiles at the actual pose
-    unsigned int min_depth_bits;   // float bits of the nearest depth (positive floats order as ints)
-    unsigned int max_extent_bits;  // float bits of the largest non-full-grid half-extent
-    double inverse_depth_sum;      // over visible Gaussians at the actual pose
+    unsigned long long visible;         // Gaussians with tiles at the actual pose
+    unsigned int min_depth_bits;        // float bits of the nearest depth (positive floats order as ints)
+    unsigned int max_extent_bits;       // float bits of the largest non-full-grid half-extent
+    double inverse_depth_sum;           // over visible Gaussians at the actual pose
+    unsigned long long occluded;        // Gaussians the occlusion cut left out of the lists
+    unsigned long long occluded_pairs;  // the pairs they would have had
 };
 struct TaskCounters {
     unsigned long long rendered_pairs;  // ranges: pairs inside the grid (cached frames park others)
@@ -63,6 +65,7 @@ struct TaskCounters {
     unsigned int split_slots;           // split: partial slots handed out
     unsigned int split_tiles;           // split: tiles that were split
     unsigned long long longest_list;    // rasterize: the most pairs one tile list holds (frame-wide, last)
+    unsigned int occlusion_misses;      // rasterize: tiles that did not stop in front of the occlusion cut
 };
 struct Counters {
     FrameCounters frame;

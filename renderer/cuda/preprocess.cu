@@ -6,6 +6,7 @@
 #include "catgs/stages/envelope.hpp"
 #include "catgs/stages/footprint.hpp"
 #include "catgs/stages/keys.hpp"
+#include "catgs/stages/occlusion.hpp"
 #include "catgs/stages/tiles.hpp"
 #include "cuda_check.hpp"
 
@@ -63,9 +64,10 @@ template <typename T, int MaxWindow, bool Summarize, int Threads, int MinBlocks>
 __global__ void __launch_bounds__(Threads, MinBlocks)
     preprocess_kernel(DeviceSceneView scene, ChunkSpace space, const View<T>* views, int window, View<T> actual,
                       bool reproject_actual, Culling culling, T guard, T guard_translation, Projected<T>* projected,
-                      std::uint64_t* touched, float* sort_depth, FrameCounters* counters) {
+                      std::uint64_t* touched, float* sort_depth, FrameCounters* counters, OcclusionCut occlusion) {
     const std::uint64_t slot = static_cast<std::uint64_t>(blockIdx.x) * blockDim.x + threadIdx.x;
     bool visible = false;
+    std::uint32_t occluded_pairs = 0;
     float nearest = INFINITY, extent = 0.0f;
     double inverse_depth = 0.0;
     std::uint64_t i = 0;
@@ -74,8 +76,16 @@ __global__ void __launch_bounds__(Threads, MinBlocks)
     if (present) {
         Projected<T> poses[MaxWindow];
         const std::uint32_t valid = project_window<T, MaxWindow>(scene, i, views, window, poses);
-        const std::uint32_t tiles =
+        std::uint32_t tiles =
             for_each_window_tile<MaxWindow>(poses, valid, window, culling, guard, views[0], [](std::uint32_t) {});
+        // Single pose only (the host never sets a cut for windows); the planner's summary below
+        // still sees the Gaussian, as it would without the cut.
+        if (MaxWindow == 1 && occlusion.active() && tiles > 0 &&
+            occluded(occlusion.pyramid, occlusion.cuts, tile_rect(poses[0], culling, actual.tiles_x, actual.tiles_y),
+                     poses[0].key_depth)) {
+            occluded_pairs = tiles;
+            tiles = 0;
+        }
         touched[slot] = tiles;
         if (Summarize && tiles == 0 && guard > T(0) && culling != Culling::exact && (valid & 1u)) {
             // In no list, but able to enter the image within the envelope (envelope.hpp).
@@ -120,6 +130,16 @@ __global__ void __launch_bounds__(Threads, MinBlocks)
     const int block_visible = __syncthreads_count(visible);
     if (threadIdx.x == 0 && block_visible > 0)
         atomicAdd(&counters->visible, static_cast<unsigned long long>(block_visible));
+    if (MaxWindow == 1 && occlusion.active()) {  // uniform across the launch
+        using CountReduce = cub::BlockReduce<std::uint32_t, Threads>;
+        __shared__ typename CountReduce::TempStorage count_temp;
+        const std::uint32_t block_pairs = CountReduce(count_temp).Sum(occluded_pairs);  // < 2^32: 128 x 2^20 tiles
+        const int block_occluded = __syncthreads_count(occluded_pairs > 0);
+        if (threadIdx.x == 0 && block_occluded > 0) {
+            atomicAdd(&counters->occluded, static_cast<unsigned long long>(block_occluded));
+            atomicAdd(&counters->occluded_pairs, static_cast<unsigned long long>(block_pairs));
+        }
+    }
     if (Summarize) {
         using FloatReduce = cub::BlockReduce<float, Threads>;
         using DoubleReduce = cub::BlockReduce<double, Threads>;
@@ -171,7 +191,7 @@ void preprocess(const PreprocessArgs<T>& a, cudaStream_t s) {
     const auto launch = [&](auto kernel, int threads, int window) {
         kernel<<<blocks_for(a.space.slots, threads), threads, 0, s>>>(
             a.scene, a.space, a.views, window, a.actual, a.reproject_actual, a.culling, a.guard, a.guard_translation,
-            a.projected, a.touched, a.sort_depth, a.counters);
+            a.projected, a.touched, a.sort_depth, a.counters, a.occlusion);
     };
     if (a.window == 1 && !a.summarize)
         launch(preprocess_kernel<T, 1, false, kSingleThreads<T>, kSingleMinBlocks<T>>, kSingleThreads<T>, 1);

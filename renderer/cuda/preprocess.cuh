@@ -12,6 +12,7 @@
 #include "catgs/stages/project.hpp"
 #include "catgs/stages/view.hpp"
 #include "kernel_common.cuh"
+#include "occlusion.cuh"
 
 namespace catgs::cuda {
 
@@ -30,6 +31,9 @@ struct PreprocessArgs {
     std::uint64_t* touched;   // by slot, plus the trailing 0 the scan needs
     float* sort_depth;        // by slot
     FrameCounters* counters;
+    /// A plain single-pose frame's occlusion cut (stages/occlusion.hpp): the Gaussians behind it
+    /// count no tiles. Inactive for windows, whose lists serve other poses.
+    OcclusionCut occlusion{};
 };
 
 template <typename T>

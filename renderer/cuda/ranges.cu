@@ -55,8 +55,11 @@ void ranges(const RangesArgs& a, cudaStream_t s) {
     CATGS_CUDA_CHECK(cudaMemsetAsync(a.range_end, 0, a.tiles * sizeof(std::uint64_t), s));
     TaskCounters fresh{};
     fresh.split_k = a.fixed_split_k;
-    // All but longest_list, the last: it spans the frame's bands (cleared when a frame begins).
-    static_assert(offsetof(TaskCounters, longest_list) + sizeof(fresh.longest_list) == sizeof(TaskCounters));
+    // All but the last two, longest_list and occlusion_misses: they span the frame's bands
+    // (cleared when a frame begins).
+    static_assert(offsetof(TaskCounters, occlusion_misses) > offsetof(TaskCounters, longest_list) &&
+                  offsetof(TaskCounters, occlusion_misses) + sizeof(fresh.occlusion_misses) + alignof(TaskCounters) >
+                      sizeof(TaskCounters));
     CATGS_CUDA_CHECK(
         cudaMemcpyAsync(a.counters, &fresh, offsetof(TaskCounters, longest_list), cudaMemcpyHostToDevice, s));
     if (a.pairs == 0 || a.shared_list) return;

@@ -1,7 +1,9 @@
 #include "rasterize.cuh"
 
 #include "catgs/stages/footprint.hpp"
+#include "catgs/stages/occlusion.hpp"
 #include "catgs/stages/split.hpp"
+#include "catgs/error.hpp"
 #include "cuda_check.hpp"
 
 #include <type_traits>
@@ -135,12 +137,30 @@ __device__ inline bool task_of_block(const TaskGrid& grid, const TaskLabel* labe
     return true;
 }
 
+/// warp_done's value for a warp whose pixels are not all done.
+constexpr std::uint32_t kNotDone = 0xffffffffu;
+
+/// The sort depth by which every pixel of a tile had stopped, from how far into its list
+/// (`list`) each warp's pixels were all done: a warp notices at the first walk after its last
+/// pixel stops, so its stop is no later than the Gaussian before that point. +infinity when a
+/// warp is not done (the list ran out first).
+template <int Warps, typename T>
+__device__ float stop_depth(const std::uint32_t* warp_done, const std::uint32_t* list, const Projected<T>* projected) {
+    std::uint32_t last = 0;
+    for (int w = 0; w < Warps; ++w) {
+        if (warp_done[w] == kNotDone) return INFINITY;
+        last = warp_done[w] > last ? warp_done[w] : last;
+    }
+    return last == 0 ? -INFINITY : projected[list[last - 1]].key_depth;  // 0: no pixel to draw
+}
+
 /// Blocks an SM is asked to hold: in float what ptxas chose unasked when measured (40 and 56
 /// registers); double, the reference precision, needs room for its 64-bit values instead (at
-/// ptxas' own choice it spilled).
-template <typename T, int Pixels>
+/// ptxas' own choice it spilled). The occlusion cut's check (CheckCut) spilled at 6 blocks of
+/// one pixel a thread (42 registers): 5.
+template <typename T, int Pixels, bool CheckCut>
 constexpr int resident_blocks() {
-    return std::is_same_v<T, double> ? 1 : Pixels == 1 ? 6 : 9;
+    return std::is_same_v<T, double> ? 1 : Pixels == 1 ? (CheckCut ? 5 : 6) : 9;
 }
 
 // One block per task (task_of_block); Gaussians staged through shared memory a batch at a
@@ -148,23 +168,32 @@ constexpr int resident_blocks() {
 // kMinTransmittance (the tail threshold is the default), so the threshold is an immediate
 // operand; a threshold chosen per block was reloaded from the constant bank and re-selected on
 // every blend, 3 of its ~24 instructions a pixel (ncu, city_ring 4K, H200).
-template <typename T, int Pixels, bool StopAtMin>
-__global__ void __launch_bounds__(PixelLayout<Pixels>::kThreads, resident_blocks<T, Pixels>())
+template <typename T, int Pixels, bool StopAtMin, bool CheckCut>
+__global__ void __launch_bounds__(PixelLayout<Pixels>::kThreads, resident_blocks<T, Pixels, CheckCut>())
     rasterize_kernel(TaskGrid grid, const std::uint64_t* range_begin, const std::uint64_t* range_end,
                      const std::uint32_t* split_slot, const TaskLabel* labels, TaskCounters* counters,
                      const std::uint32_t* values, const Projected<T>* projected, View<T> view, Vec3<T> background,
-                     T tail_transmittance, Partial<T>* partials, PixelOutputs out) {
+                     T tail_transmittance, Partial<T>* partials, PixelOutputs out, const float* predicted_cut,
+                     float* recorded_cut) {
     using Layout = PixelLayout<Pixels>;
     constexpr int kThreads = Layout::kThreads, kStaged = kBatch / kThreads;
     constexpr unsigned kAll = 0xffffffffu;
     __shared__ Splat<T> batch[kBatch];
     __shared__ std::uint8_t reaches[kBatch];  // the same bits, where a ballot reads them without bank conflicts
+    // Per warp: how far into the list its pixels were all done (kNotDone: not yet), for the
+    // occlusion cut's check and record (stop_depth).
+    __shared__ std::uint32_t warp_done[kThreads / 32];
+    // CheckCut: the tile's predicted cut and the batch's sort depths, where a ballot finds the
+    // first Gaussian deeper than the cut.
+    __shared__ float tile_cut;
+    __shared__ float depths[CheckCut ? kBatch : 1];
     std::uint32_t tile, index;
     if (!task_of_block(grid, labels, counters, blockIdx.x, tile, index)) return;  // uniform across the block
     const int tile_x = static_cast<int>(tile % view.tiles_x), tile_y = static_cast<int>(tile / view.tiles_x);
     const int thread = static_cast<int>(threadIdx.x);
     const int warp = thread / 32, lane = thread % 32;
     const Layout layout(warp);
+    if (lane == 0) warp_done[warp] = kNotDone;
     const std::uint32_t warp_blocks = ((1u << Pixels) - 1u) << (warp * Pixels);
     T px[Layout::kCols], py[Layout::kRows];
 #pragma unroll
@@ -182,12 +211,18 @@ __global__ void __launch_bounds__(PixelLayout<Pixels>::kThreads, resident_blocks
     if (slot != kNoSlot) subtask_range(begin, end, counters->split_k, index, begin, end);
     const T threshold = StopAtMin || index == 0 ? static_cast<T>(kMinTransmittance) : tail_transmittance;
 
+    if (CheckCut) {
+        // Its own barrier: an empty list skips the batch loop's, and its check below still reads the cut.
+        if (thread == 0) tile_cut = slot == kNoSlot ? predicted_cut[tile] : INFINITY;
+        __syncthreads();
+    }
     SignedPixel<T> acc[Pixels];
 #pragma unroll
     for (int b = 0; b < Pixels; ++b)
         acc[b] = SignedPixel<T>::starting(px[b % Layout::kCols] < static_cast<T>(view.width) &&
                                           py[b / Layout::kCols] < static_cast<T>(view.height));
-    for (std::uint64_t start = begin; start < end; start += kBatch) {
+    std::uint64_t start = begin;
+    for (; start < end; start += kBatch) {
         if (__syncthreads_count(all_done(acc)) == kThreads) break;
 #pragma unroll
         for (int k = 0; k < kStaged; ++k) {
@@ -198,30 +233,62 @@ __global__ void __launch_bounds__(PixelLayout<Pixels>::kThreads, resident_blocks
             const std::uint32_t bits = grid.warp_skip ? blocks_reached(p, tile_x, tile_y) : 0xffu;
             batch[at] = Splat<T>{p.mean, AlphaMath<T>::staged_conic(p.conic), bits, p.opacity, p.colour};
             reaches[at] = static_cast<std::uint8_t>(bits);
+            if (CheckCut) depths[at] = p.key_depth;
         }
         __syncthreads();
         const int count = end - start < kBatch ? static_cast<int>(end - start) : kBatch;
         // Warp-uniform from here: every lane walks the same Gaussians in list order.
         for (int base = 0; base < count; base += 32) {
-            if (__all_sync(kAll, all_done(acc))) break;
+            if (__all_sync(kAll, all_done(acc))) {
+                if (lane == 0 && warp_done[warp] == kNotDone)
+                    warp_done[warp] = static_cast<std::uint32_t>(start - begin) + static_cast<std::uint32_t>(base);
+                break;
+            }
             const int mine = base + lane;
+            // The chunk's Gaussians whose lanes are set in `lanes`, in list order.
+            const auto blend_lanes = [&](unsigned lanes) {
+                while (lanes != 0) {
+                    const Splat<T> s = batch[base + __ffs(lanes) - 1];  // by value: three 16-byte loads in float
+                    lanes &= lanes - 1;
+                    typename AlphaMath<T>::Row rows[Layout::kRows];
+#pragma unroll
+                    for (int r = 0; r < Layout::kRows; ++r) rows[r] = AlphaMath<T>::row(s, py[r]);
+#pragma unroll
+                    for (int b = 0; b < Pixels; ++b) {
+                        if (!(s.reaches >> layout.block(b) & 1u)) continue;  // uniform: the warp skips it
+                        const T power = AlphaMath<T>::power(s, px[b % Layout::kCols], rows[b / Layout::kCols]);
+                        // blend's tests decide (its power <= 0 holds in either domain); in float only
+                        // rounding at alpha = 1/255 and the hardware exp's last bits can differ.
+                        blend_power_signed(acc[b], power, s.opacity, s.colour, threshold, AlphaMath<T>{});
+                    }
+                }
+            };
             unsigned todo = __ballot_sync(kAll, mine < count && (reaches[mine] & warp_blocks) != 0);
-            while (todo != 0) {
-                const Splat<T> s = batch[base + __ffs(todo) - 1];  // by value: three 16-byte loads in float
-                todo &= todo - 1;
-                typename AlphaMath<T>::Row rows[Layout::kRows];
-#pragma unroll
-                for (int r = 0; r < Layout::kRows; ++r) rows[r] = AlphaMath<T>::row(s, py[r]);
-#pragma unroll
-                for (int b = 0; b < Pixels; ++b) {
-                    if (!(s.reaches >> layout.block(b) & 1u)) continue;  // uniform: the warp skips it
-                    const T power = AlphaMath<T>::power(s, px[b % Layout::kCols], rows[b / Layout::kCols]);
-                    // blend's tests decide (its power <= 0 holds in either domain); in float only
-                    // rounding at alpha = 1/255 and the hardware exp's last bits can differ.
-                    blend_power_signed(acc[b], power, s.opacity, s.colour, threshold, AlphaMath<T>{});
+            if (CheckCut) {
+                // The occlusion cut's check, exact: every pixel done before the first Gaussian
+                // deeper than the cut (the list is in sort-depth order), behind which the
+                // Gaussians left out would have come. Later chunks repeat it harmlessly.
+                const unsigned deeper = __ballot_sync(kAll, mine < count && depths[mine] > tile_cut);
+                if (deeper != 0) {
+                    const unsigned in_front = (1u << (__ffs(deeper) - 1)) - 1u;
+                    blend_lanes(todo & in_front);
+                    todo &= ~in_front;
+                    if (!__all_sync(kAll, all_done(acc)) && lane == 0) atomicAdd(&counters->occlusion_misses, 1u);
                 }
             }
+            blend_lanes(todo);
         }
+    }
+    const bool finished = __all_sync(kAll, all_done(acc));
+    // The list ran out with pixels to draw: what the cut left out lay in front of them.
+    if (CheckCut && !finished && tile_cut < INFINITY && lane == 0) atomicAdd(&counters->occlusion_misses, 1u);
+    if (recorded_cut) {  // uniform across the launch
+        if (lane == 0 && finished && warp_done[warp] == kNotDone)
+            warp_done[warp] = static_cast<std::uint32_t>((start < end ? start : end) - begin);
+        __syncthreads();
+        if (thread == 0 && index == 0)
+            recorded_cut[tile] = slot == kNoSlot ? stop_depth<kThreads / 32>(warp_done, values + begin, projected)
+                                                 : INFINITY;  // a split tile's stop is not known here
     }
 #pragma unroll
     for (int b = 0; b < Pixels; ++b) {
@@ -246,12 +313,22 @@ void launch_rasterize(const RasterizeArgs<T>& a, cudaStream_t s) {
     const auto launch = [&](auto kernel) {
         kernel<<<static_cast<unsigned>(a.blocks), PixelLayout<Pixels>::kThreads, 0, s>>>(
             a.grid, a.range_begin, a.range_end, a.split_slot, a.labels, a.counters, a.values, a.projected, a.view,
-            a.background, a.tail_transmittance, a.partials, a.out);
+            a.background, a.tail_transmittance, a.partials, a.out, a.predicted_cut, a.recorded_cut);
     };
-    if (a.tail_transmittance == static_cast<T>(kMinTransmittance))
-        launch(rasterize_kernel<T, Pixels, true>);
+    const bool stop_at_min = a.tail_transmittance == static_cast<T>(kMinTransmittance);
+    if constexpr (std::is_same_v<T, float>) {
+        // A frame under the cut does not split (frame_occlusion.cu): its tasks all stop at the minimum.
+        if (a.predicted_cut) {
+            if (!stop_at_min) throw Error("rasterize: the occlusion cut's check needs every task to stop at 1e-4");
+            launch(rasterize_kernel<T, Pixels, true, true>);
+            return;
+        }
+    }
+    if (a.predicted_cut) throw Error("rasterize: the occlusion cut is for float renders");
+    if (stop_at_min)
+        launch(rasterize_kernel<T, Pixels, true, false>);
     else
-        launch(rasterize_kernel<T, Pixels, false>);
+        launch(rasterize_kernel<T, Pixels, false, false>);
 }
 
 }  // namespace
@@ -272,10 +349,10 @@ std::uint64_t resident_tasks(RasterLayout layout) {
     CATGS_CUDA_CHECK(cudaGetDevice(&device));
     CATGS_CUDA_CHECK(cudaDeviceGetAttribute(&sms, cudaDevAttrMultiProcessorCount, device));
     if (layout == RasterLayout::pixel_per_thread)
-        CATGS_CUDA_CHECK(cudaOccupancyMaxActiveBlocksPerMultiprocessor(&blocks, rasterize_kernel<T, 1, true>,
+        CATGS_CUDA_CHECK(cudaOccupancyMaxActiveBlocksPerMultiprocessor(&blocks, rasterize_kernel<T, 1, true, false>,
                                                                        PixelLayout<1>::kThreads, 0));
     else
-        CATGS_CUDA_CHECK(cudaOccupancyMaxActiveBlocksPerMultiprocessor(&blocks, rasterize_kernel<T, 2, true>,
+        CATGS_CUDA_CHECK(cudaOccupancyMaxActiveBlocksPerMultiprocessor(&blocks, rasterize_kernel<T, 2, true, false>,
                                                                        PixelLayout<2>::kThreads, 0));
     return static_cast<std::uint64_t>(sms) * static_cast<std::uint64_t>(blocks);
 }

@@ -45,6 +45,11 @@ struct RasterizeArgs {
     T tail_transmittance;  // where a split tile's later sub-tasks stop
     Partial<T>* partials;
     PixelOutputs out;
+    /// The occlusion cut (stages/occlusion.hpp): this frame's predicted cut a tile, which each
+    /// tile checks its stop against (misses counted in counters), or null; and where each tile
+    /// records the depth it stopped at for the next frame's prediction, or null.
+    const float* predicted_cut = nullptr;
+    float* recorded_cut = nullptr;
 };
 
 template <typename T>

@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "catgs/cache.hpp"
+#include "catgs/occlusion_tracker.hpp"
 #include "catgs/render_options.hpp"
 #include "catgs/stages/tiles.hpp"
 #include "catgs/stages/view.hpp"
@@ -51,6 +52,12 @@ struct Frame {
     std::uint64_t total = 0;  // the frame's pairs
     std::vector<TileRows> bands;
     bool split_used = false;
+
+    /// The occlusion cut (stages/occlusion.hpp): applied to this frame's lists (a plain
+    /// single-pose frame after a recorded one), and whether rasterize records the tile cuts.
+    bool occlusion = false;
+    OcclusionMotion occlusion_motion{};
+    bool record_occlusion = false;
 };
 
 /// What read_back_stages needs to know of the frame whose lists the device holds.
@@ -89,6 +96,7 @@ struct CudaRenderer<T>::Impl {
     FrameBuffers<T> buffers;
     HostStaging<T> host;
     LastFrame last;  // read_back_stages
+    OcclusionTracker occlusion;
     CopyStreams copy;
     bool copy_waits = stream_memory_waits_available();  // false once the driver refused one
     int copied_copy_bands = 0;                          // of this frame, enqueued on the copy stream
@@ -108,6 +116,12 @@ struct CudaRenderer<T>::Impl {
     FrameStats render(const Camera& camera, const RenderOptions& options, const HostOutputs& out,
                       const FrameHints* hints);
     Frame<T> plan_frame(const Camera& camera, const RenderOptions& options, const FrameHints* hints);
+    /// Whether the frame takes the occlusion cut and records its tile cuts (frame_occlusion.cu).
+    void plan_occlusion(Frame<T>& f, const Camera& camera, const HostOutputs& out);
+    /// One pass of the whole frame into `out`: lists, pixels and copies; returns its stats.
+    FrameStats draw(Frame<T>& f, const HostOutputs& out);
+    /// After a frame: the next one's cut from this one's records, or the back-off after a miss.
+    void occlusion_rendered(const Frame<T>& f, const Camera& camera, bool missed);
     void begin_frame(const Frame<T>& f, const HostOutputs& out);
     /// Where this frame's kernels write, for `out`.
     PixelOutputs device_outputs(const Frame<T>& f, const HostOutputs& out);
