@@ -1,6 +1,7 @@
 #include "catgs/cpu_renderer.hpp"
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <limits>
@@ -71,6 +72,7 @@ CpuRenderer<T>::CpuRenderer(int threads, CpuLimits limits)
 template <typename T>
 void CpuRenderer<T>::reset_cache() {
     planner_.reset();
+    occlusion_.reset();
 }
 
 template <typename T>
@@ -92,80 +94,24 @@ FrameStats CpuRenderer<T>::render_frame(const Scene& scene, const Camera& camera
     scene.check_consistent("cpu renderer: scene");
     const View<T> view = make_view<T>(camera, scene.origin, options.near_plane);
     const FramePlanner::Plan plan = planner_.next(camera, options.catgs, hints);
-    const CacheMode frame_cache = plan.cache(options.catgs);
     FrameStats stats;
     stats.key_frame = plan.key;
     stats.window = plan.window;
     stats.order_reused = !plan.key && !plan.resort;
     const auto start = Clock::now();
-    auto t = Clock::now();
     tiles_y_ = view.tiles_y;
-    band_ = TileRows{};
     if (out.image)
         out.image->resize(view.width, view.height);
     else
         out.partial->resize(view.width, view.height);
-    bool drawn = false;  // a banded frame rasterizes band by band
+    const Window window = plan.key ? key_window(scene, plan, options) : Window{};
+    const bool banded = draw_frame(scene, camera, view, window, plan, options, out, stats);
     if (plan.key) {
-        // The window: every pose projected with the near plane lowered by the translation
-        // guard and footprints dilated by the pixel guard, so a pose inside the envelope
-        // finds every Gaussian it needs in the cached lists.
-        Window window;
-        const bool speculative = frame_cache == CacheMode::speculative;
-        window.guard = speculative ? static_cast<T>(options.catgs.guard_px) : T(0);
-        window.guard_translation = speculative ? static_cast<T>(options.catgs.guard_translation) : T(0);
-        const double near = plan.window_near_plane(options.catgs, options.near_plane);
-        window.near_plane = static_cast<T>(near);
-        for (const Camera& c : plan.poses) window.views.push_back(make_view<T>(c, scene.origin, near));
-        chunk_cull(scene, window, options.chunk_culling && options.culling != Culling::exact);
-        stats.stage_ms[Stage::chunk_cull] = elapsed_ms(t);
-        t = Clock::now();
-        preprocess(scene, view, window, options.culling);
-        stats.stage_ms[Stage::preprocess] = elapsed_ms(t);
-        if (needs_bands(options.culling)) {
-            render_bands(scene, view, window, options, plan.split, out, stats);
-            planner_.invalidate();  // a banded frame keeps no whole-frame lists to cache
-            drawn = true;
-        } else {
-            t = Clock::now();
-            keys(scene, window, options.culling);
-            // Cached frames that re-sort re-key from the pairs in emission (Gaussian) order
-            // (rekey); with the depth order reused they never read them.
-            if (plan.keep_emission_order) {
-                emitted_keys_ = keys_;
-                emitted_values_ = values_;
-            } else {
-                emitted_keys_.clear();
-                emitted_values_.clear();
-            }
-            stats.stage_ms[Stage::keys] = elapsed_ms(t);
-            sort_and_schedule(view, options, plan.split, stats);
-            if (frame_cache != CacheMode::off)
-                planner_.key_rendered(plan, summarize(scene, window, options.culling));
-            else
-                planner_.invalidate();
-        }
-    } else {
-        reproject(scene, view);
-        stats.stage_ms[Stage::preprocess] = elapsed_ms(t);
-        if (plan.resort) {
-            t = Clock::now();
-            rekey(view, options.culling);
-            stats.stage_ms[Stage::keys] = elapsed_ms(t);
-            sort_and_schedule(view, options, plan.split, stats);
-        }
-    }
-    if (!drawn) {
-        t = Clock::now();
-        rasterize(view, options, out);
-        stats.stage_ms[Stage::rasterize] = elapsed_ms(t);
-        t = Clock::now();
-        merge(view, options, out);
-        stats.stage_ms[Stage::merge] = elapsed_ms(t);
-        stats.pairs = rendered_pairs_;
-        stats.tasks = tasks_.size();
-        stats.split_tasks = split_tasks_;
-        stats.longest_list = longest_list_;
+        // A banded frame keeps no whole-frame lists to cache.
+        if (!banded && plan.cache(options.catgs) != CacheMode::off)
+            planner_.key_rendered(plan, summarize(scene, window, options.culling));
+        else
+            planner_.invalidate();
     }
     stats.total_ms = elapsed_ms(start);
     stats.split_k = split_k_;
@@ -175,6 +121,81 @@ FrameStats CpuRenderer<T>::render_frame(const Scene& scene, const Camera& camera
         stats.visible += tiles_touched_[i] > 0 && projected_[i].opacity > 0;
     planner_.frame_rendered(plan, stats);
     return stats;
+}
+
+// The window: every pose projected with the near plane lowered by the translation guard and
+// footprints dilated by the pixel guard, so a pose inside the envelope finds every Gaussian it
+// needs in the cached lists.
+template <typename T>
+typename CpuRenderer<T>::Window CpuRenderer<T>::key_window(const Scene& scene, const FramePlanner::Plan& plan,
+                                                           const RenderOptions& options) const {
+    Window window;
+    const bool speculative = plan.cache(options.catgs) == CacheMode::speculative;
+    window.guard = speculative ? static_cast<T>(options.catgs.guard_px) : T(0);
+    window.guard_translation = speculative ? static_cast<T>(options.catgs.guard_translation) : T(0);
+    const double near = plan.window_near_plane(options.catgs, options.near_plane);
+    window.near_plane = static_cast<T>(near);
+    for (const Camera& c : plan.poses) window.views.push_back(make_view<T>(c, scene.origin, near));
+    return window;
+}
+
+template <typename T>
+bool CpuRenderer<T>::draw(const Scene& scene, const View<T>& view, const Window& window, const FramePlanner::Plan& plan,
+                          const RenderOptions& options, const FrameOutput& out, FrameStats& stats) {
+    auto t = Clock::now();
+    band_ = TileRows{};
+    if (plan.key) {
+        chunk_cull(scene, window, options.chunk_culling && options.culling != Culling::exact);
+        stats.stage_ms[Stage::chunk_cull] += elapsed_ms(t);
+        t = Clock::now();
+        preprocess(scene, view, window, options.culling);
+        if (needs_bands(options.culling)) {
+            // The cut and its record are for whole-frame lists: a frame too large for one pass
+            // is drawn in bands with every Gaussian.
+            record_occlusion_ = false;
+            if (cutting()) {
+                occlusion_cells_.clear();
+                preprocess(scene, view, window, options.culling);
+            }
+            stats.stage_ms[Stage::preprocess] += elapsed_ms(t);
+            render_bands(scene, view, window, options, plan.split, out, stats);
+            return true;
+        }
+        stats.stage_ms[Stage::preprocess] += elapsed_ms(t);
+        t = Clock::now();
+        keys(scene, window, options.culling);
+        // Cached frames that re-sort re-key from the pairs in emission (Gaussian) order
+        // (rekey); with the depth order reused they never read them.
+        if (plan.keep_emission_order) {
+            emitted_keys_ = keys_;
+            emitted_values_ = values_;
+        } else {
+            emitted_keys_.clear();
+            emitted_values_.clear();
+        }
+        stats.stage_ms[Stage::keys] += elapsed_ms(t);
+        sort_and_schedule(view, options, plan.split, stats);
+    } else {
+        reproject(scene, view);
+        stats.stage_ms[Stage::preprocess] += elapsed_ms(t);
+        if (plan.resort) {
+            t = Clock::now();
+            rekey(view, options.culling);
+            stats.stage_ms[Stage::keys] += elapsed_ms(t);
+            sort_and_schedule(view, options, plan.split, stats);
+        }
+    }
+    t = Clock::now();
+    rasterize(view, options, out);
+    stats.stage_ms[Stage::rasterize] += elapsed_ms(t);
+    t = Clock::now();
+    merge(view, options, out);
+    stats.stage_ms[Stage::merge] += elapsed_ms(t);
+    stats.pairs = rendered_pairs_;
+    stats.tasks = tasks_.size();
+    stats.split_tasks = split_tasks_;
+    stats.longest_list = longest_list_;
+    return false;
 }
 
 // Sort, tile ranges and the task list, timed: what key frames and re-sorting cached frames
@@ -244,16 +265,26 @@ void CpuRenderer<T>::preprocess(const Scene& scene, const View<T>& actual, const
     const std::size_t sh_stride = scene.sh_floats_per_gaussian();
     window_min_depth_ = std::numeric_limits<double>::infinity();
     uncached_bound_px_ = 0;
+    occluded_ = occluded_pairs_ = 0;
+    const bool cut = cutting() && w == 1;  // the cut is planned for single poses only
     std::mutex min_mutex;
     parallel_for(
         runs_.size(), kGaussianGrain / kChunkGaussians, threads_, [&](std::size_t first_run, std::size_t last_run) {
             Projected<T> poses[kMaxWindow];
             double local_min = std::numeric_limits<double>::infinity(), local_bound = 0;
+            std::uint64_t local_occluded = 0, local_occluded_pairs = 0;
             for (std::size_t run = first_run; run < last_run; ++run) {
                 for (std::size_t i = runs_[run].first; i < runs_[run].second; ++i) {
                     const std::uint32_t valid = project_window(scene, i, window, poses);
                     tiles_touched_[i] = for_each_window_tile<kMaxWindow>(poses, valid, w, culling, window.guard,
                                                                          window.views[0], [](std::uint32_t) {});
+                    if (cut && tiles_touched_[i] > 0 && occluded_at(poses[0], culling, window.views[0])) {
+                        // Behind every tile it touches: no list holds it, and it needs no colour.
+                        ++local_occluded;
+                        local_occluded_pairs += tiles_touched_[i];
+                        tiles_touched_[i] = 0;
+                        continue;
+                    }
                     if (tiles_touched_[i] == 0) {
                         // In no list, but close enough to enter the image within the envelope (a near
                         // Gaussian just outside it moves f dt / z; a needle just outside opens up into
@@ -294,6 +325,8 @@ void CpuRenderer<T>::preprocess(const Scene& scene, const View<T>& actual, const
             std::lock_guard lock(min_mutex);
             window_min_depth_ = std::min(window_min_depth_, local_min);
             uncached_bound_px_ = std::max(uncached_bound_px_, local_bound);
+            occluded_ += local_occluded;
+            occluded_pairs_ += local_occluded_pairs;
         });
 }
 
@@ -479,14 +512,17 @@ std::uint32_t CpuRenderer<T>::split(const CatgsOptions& options) {
 }
 
 // Every task blends its slice of its tile's list from T = 1. A tile that is not
-// split writes its pixels; a sub-task of a split tile writes (R, A) to its partial slot.
+// split writes its pixels; a sub-task of a split tile writes (R, A) to its partial slot. A
+// tile also notes the sort depth by which all its pixels had stopped, for the occlusion cut.
 template <typename T>
 void CpuRenderer<T>::rasterize(const View<T>& view, const RenderOptions& options, const FrameOutput& out) {
     const Vec3<T> background{static_cast<T>(options.background[0]), static_cast<T>(options.background[1]),
                              static_cast<T>(options.background[2])};
     const T tail_threshold = static_cast<T>(options.catgs.split_tail_transmittance);
+    std::atomic<std::uint64_t> misses{0};
     parallel_for(tasks_.size(), kTaskGrain, threads_, [&](std::size_t begin, std::size_t end) {
         std::vector<const Projected<T>*> list;
+        std::uint64_t local_misses = 0;
         for (std::size_t task = begin; task < end; ++task) {
             const TileTask tt = tasks_[task];
             const TileRange range = ranges_[tt.tile];
@@ -498,12 +534,17 @@ void CpuRenderer<T>::rasterize(const View<T>& view, const RenderOptions& options
             const int x0 = static_cast<int>(tt.tile % view.tiles_x) * kTileSize;
             const int y0 = static_cast<int>(tt.tile / view.tiles_x) * kTileSize;
             const int x1 = std::min(x0 + kTileSize, view.width), y1 = std::min(y0 + kTileSize, view.height);
+            float stop_depth = -INFINITY;
             for (int y = y0; y < y1; ++y)
                 for (int x = x0; x < x1; ++x) {
                     PixelAccumulator<T> acc;
                     const T px = static_cast<T>(x) + T(0.5), py = static_cast<T>(y) + T(0.5);
                     for (const Projected<T>* g : list)
-                        if (blend_gaussian(acc, g->mean, g->conic, g->opacity, g->colour, px, py, threshold)) break;
+                        if (blend_gaussian(acc, g->mean, g->conic, g->opacity, g->colour, px, py, threshold)) {
+                            stop_depth = std::max(stop_depth, g->key_depth);
+                            break;
+                        }
+                    if (!acc.done) stop_depth = INFINITY;
                     if (split_slot_[tt.tile] == kNoSlot) {
                         store_pixel(out.image, out.partial, x, y, acc.colour, acc.transmittance, acc.done, background);
                     } else {
@@ -512,8 +553,13 @@ void CpuRenderer<T>::rasterize(const View<T>& view, const RenderOptions& options
                             Partial<T>{acc.colour, acc.transmittance};
                     }
                 }
+            // A sub-task's stop says nothing of its tile's.
+            if (tt.index == 0)
+                local_misses += tile_stopped(tt.tile, split_slot_[tt.tile] == kNoSlot ? stop_depth : INFINITY);
         }
+        misses += local_misses;
     });
+    occlusion_misses_ = misses;
 }
 
 // Composite each split tile's sub-tasks front to back.

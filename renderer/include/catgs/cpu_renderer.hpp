@@ -3,7 +3,9 @@
 // each a member of that name with its own buffer, using the host-device math in stages/.
 // With the CaT-GS cache on, a key frame preprocesses every Gaussian against the window's W
 // poses (the union of its footprints) and the following frames of the window only re-project
-// the cached Gaussians before rasterizing the cached lists (cache.hpp).
+// the cached Gaussians before rasterizing the cached lists (cache.hpp). With the occlusion cut
+// on, a plain float frame leaves out the Gaussians behind where the last frame's tiles turned
+// opaque, and is drawn again without the cut where a tile did not (stages/occlusion.hpp).
 // Precision is a template parameter (float and double are instantiated). Deterministic:
 // keys are emitted in Gaussian order from a prefix-sum layout and sorted stably, so equal
 // depths in a tile keep Gaussian-index order; the result is independent of thread count.
@@ -17,6 +19,7 @@
 #include "catgs/cache.hpp"
 #include "catgs/camera.hpp"
 #include "catgs/image.hpp"
+#include "catgs/occlusion_tracker.hpp"
 #include "catgs/partial_image.hpp"
 #include "catgs/render_options.hpp"
 #include "catgs/scene.hpp"
@@ -61,7 +64,8 @@ public:
     FrameStats render_partial(const Scene& scene, const Camera& camera, const RenderOptions& options, PartialImage& out,
                               const FrameHints* hints = nullptr);
 
-    /// Forgets the inter-frame cache and the pose history (a new stream or a new scene).
+    /// Forgets the inter-frame cache, the pose history and the recorded occlusion cut (a new
+    /// stream or a new scene).
     void reset_cache();
 
     /// The pairs one pass may hold: CpuLimits::max_pairs, or with 0 kAutoPairMemoryShare of the
@@ -97,6 +101,10 @@ private:
     };
     FrameStats render_frame(const Scene& scene, const Camera& camera, const RenderOptions& options,
                             const FrameOutput& out, const FrameHints* hints);
+    Window key_window(const Scene& scene, const FramePlanner::Plan& plan, const RenderOptions& options) const;
+    /// One pass over the frame, its stage times added to `stats`; returns whether it was banded.
+    bool draw(const Scene& scene, const View<T>& view, const Window& window, const FramePlanner::Plan& plan,
+              const RenderOptions& options, const FrameOutput& out, FrameStats& stats);
     void chunk_cull(const Scene& scene, const Window& window, bool cull_chunks);
     void preprocess(const Scene& scene, const View<T>& actual, const Window& window, Culling culling);
     void reproject(const Scene& scene, const View<T>& actual);
@@ -117,6 +125,23 @@ private:
     void render_bands(const Scene& scene, const View<T>& view, const Window& window, const RenderOptions& options,
                       bool may_split, const FrameOutput& out, FrameStats& stats);
     bool banded() const { return band_.begin > 0 || band_.end < tiles_y_; }
+
+    /// The frame drawn (cpu_renderer_occlusion.cpp): with the occlusion cut where it takes it,
+    /// and again without it where a tile missed; returns whether the last pass was banded.
+    bool draw_frame(const Scene& scene, const Camera& camera, const View<T>& view, const Window& window,
+                    const FramePlanner::Plan& plan, const RenderOptions& options, const FrameOutput& out,
+                    FrameStats& stats);
+    /// The occlusion cut (stages/occlusion.hpp): whether this frame records its tile cuts and
+    /// takes the cut (then the pyramid's cells are set); once a frame.
+    void plan_occlusion(const Camera& camera, const View<T>& view, const RenderOptions& options,
+                        const FramePlanner::Plan& plan, const FrameOutput& out);
+    bool cutting() const { return !occlusion_cells_.empty(); }
+    /// Whether preprocess leaves out a Gaussian of the single pose `pose` (a cutting frame).
+    bool occluded_at(const Projected<T>& pose, Culling culling, const View<T>& view) const;
+    /// Rasterize's end of a whole tile that every pixel stopped by sort depth `stop_depth`
+    /// (+infinity: not all): its record, and whether it missed the cut.
+    bool tile_stopped(std::uint32_t tile, float stop_depth);
+    void occlusion_rendered(const Camera& camera, bool took_cut, bool missed);
 
     /// Projects Gaussian i against every pose of the window into `poses`; returns the mask of
     /// poses where it is visible. Shared by the count and the emit pass.
@@ -149,6 +174,15 @@ private:
     std::vector<TileTask> tasks_;            // split: tiles, then extra sub-tasks
     std::vector<std::uint32_t> split_slot_;  // split: first partial slot of a split tile, or kNoSlot
     std::vector<Partial<T>> partials_;       // rasterize: per slot, 256 pixels of (R, A)
+    OcclusionTracker occlusion_;
+    bool record_occlusion_ = false;       // rasterize: this frame records its tile cuts
+    OcclusionPyramid occlusion_pyramid_;  // preprocess: the cut's pyramid, when cutting
+    std::vector<float> occlusion_cells_;  // preprocess: its cells (empty: no cut this pass)
+    std::vector<float> occlusion_last_;   // the last recording frame's tile cuts
+    std::vector<float> occlusion_now_;    // rasterize: this frame's
+    std::uint64_t occluded_ = 0;          // preprocess: Gaussians the cut left out
+    std::uint64_t occluded_pairs_ = 0;    // preprocess: the pairs they would have had
+    std::uint64_t occlusion_misses_ = 0;  // rasterize: tiles that did not stop in front of the cut
 };
 
 extern template class CpuRenderer<float>;
