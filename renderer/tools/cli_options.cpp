@@ -106,7 +106,8 @@ void add_pipeline_flags(CLI::App& app, PipelineFlags& f) {
     app.add_option("--occlusion-cut", f.occlusion_cut,
                    "plain frames leave out the Gaussians behind where the last frame's tiles turned opaque, check "
                    "every tile and draw the frame again in full where one did not (on or off; the image is the same; "
-                   "CUDA float renders)")
+                   "float renders; off by default: a miss redraws the whole frame, which so far costs more than the "
+                   "cut saves)")
         ->capture_default_str();
 }
 

@@ -74,10 +74,13 @@ struct CatgsOptions {
     /// that the plans of tests and code that set their own options do not depend on timing;
     /// default_pipeline_options() measures time.
     WindowCost window_cost = WindowCost::off;
-    /// Occlusion cut (stages/occlusion.hpp, CUDA float renders): a plain frame leaves out the
-    /// Gaussians behind where the last frame's tiles turned opaque, checks every tile, and draws
-    /// itself again without the cut where one did not turn opaque in front of it, so the image
-    /// is the full lists' either way. Off here, on in default_pipeline_options().
+    /// Occlusion cut (stages/occlusion.hpp, float renders of either backend): a plain frame
+    /// leaves out the Gaussians behind where the last frame's tiles turned opaque, checks every
+    /// tile, and draws itself again without the cut where one did not turn opaque in front of
+    /// it, so the image is the full lists' either way. Off by default, in
+    /// default_pipeline_options() too: on the bench kit's paths one or two tiles of a frame
+    /// that barely turn opaque miss on nearly every frame it is tried, and the whole-frame
+    /// redraw costs more than the cut saves (docs/pipeline.md#occlusion-cut).
     bool occlusion_cut = false;
 };
 

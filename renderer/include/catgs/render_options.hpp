@@ -64,7 +64,6 @@ inline RenderOptions default_pipeline_options() {
     o.catgs.reuse_order_max_angle = kDefaultReuseOrderMaxAngle;
     o.catgs.split_k = kDefaultSplitK;
     o.catgs.guard_px = kDefaultGuardPx;
-    o.catgs.occlusion_cut = true;
     return o;
 }
 
