@@ -12,48 +12,24 @@
 #include <vector>
 
 #include "catgs/cpu_renderer.hpp"
+#include "occlusion_paths.hpp"
 #include "test_util.hpp"
 
 namespace catgs {
 namespace {
 
 constexpr int kWidth = 160, kHeight = 120;  // 10 x 8 tiles
-constexpr std::size_t kJumpFrame = 8;       // the sideways jump past the scene's edge
+using test::occlusion::kJumpFrame;
 
-/// A camera at `centre` turned by `yaw` radians about the vertical axis.
-Camera turned_camera(int width, int height, std::array<double, 3> centre, double yaw) {
-    Camera c = test::forward_camera(width, height, 70.0, centre);
-    const double s = std::sin(yaw), k = std::cos(yaw);
-    c.pose = pose_from_centre(centre, {k, 0, -s, 0, 1, 0, s, 0, k});
-    return c;
-}
-
-/// A glide (small steps and turns: the cut should hold), a jump sideways past the scene's edge
-/// (tiles that were opaque now see empty space: the cut must miss and the frame be drawn
-/// again), a turn too wide for the cut, and a glide again.
 std::vector<Camera> occlusion_path() {
-    const int width = kWidth, height = kHeight;
-    std::vector<Camera> path;
-    for (int f = 0; f < 8; ++f) path.push_back(turned_camera(width, height, {0.02 * f, 0.01 * f, 0.03 * f}, 0.001 * f));
-    path.push_back(turned_camera(width, height, {4.5, 0.0, 0.2}, 0.0));
-    path.push_back(turned_camera(width, height, {4.5, 0.0, 0.2}, 0.3));
-    for (int f = 0; f < 4; ++f) path.push_back(turned_camera(width, height, {4.5 - 0.02 * f, 0.0, 0.2}, 0.3));
-    return path;
+    return test::occlusion::path(kWidth, kHeight);
 }
 
 Scene dense_scene(const std::string& what) {
-    test::RandomSceneParams p;
-    p.count = 60000;
-    p.extent = 3.0;
-    p.log_scale_min = -3.5;
-    p.log_scale_max = -1.5;
-    return test::random_scene(test::fresh_seed(what), p);
+    return test::random_scene(test::fresh_seed(what), test::occlusion::dense_scene(60000));
 }
 
-struct PathCounts {
-    std::uint64_t occluded = 0, redrawn = 0, frames_cut = 0;
-    std::vector<FrameStats> stats;  // the cut's, a frame each
-};
+using test::occlusion::PathCounts;
 
 /// Renders `path` with the cut on and off, one renderer each, and asserts every frame equal.
 template <typename T>
@@ -70,22 +46,9 @@ PathCounts compare_path(const Scene& scene, const std::vector<Camera>& path, Ren
         const FrameStats b = without.render(scene, path[f], off, b_image);
         const std::string frame = what + ", frame " + std::to_string(f);
         EXPECT_EQ(a_image.rgb, b_image.rgb) << frame;
-        EXPECT_EQ(a.key_frame, b.key_frame) << frame;
-        EXPECT_EQ(b.occluded, 0u) << frame;
-        EXPECT_FALSE(b.occlusion_redrawn) << frame;
-        if (!a.occlusion_redrawn) {
-            EXPECT_EQ(a.pairs + a.occluded_pairs, b.pairs) << frame;
-        } else {
-            EXPECT_EQ(a.pairs, b.pairs) << frame << ": the second pass draws every Gaussian";
-        }
-        EXPECT_EQ(a.occluded > 0, a.occluded_pairs > 0) << frame;
-        counts.occluded += a.occluded;
-        counts.redrawn += a.occlusion_redrawn;
-        counts.frames_cut += a.occluded > 0;
-        counts.stats.push_back(a);
+        test::occlusion::check_frame(a, b, frame, counts);
     }
-    std::cout << "[occlusion] " << what << ": " << counts.frames_cut << " of " << path.size() << " frames cut, "
-              << counts.occluded << " Gaussians left out, " << counts.redrawn << " redrawn" << std::endl;
+    test::occlusion::report(counts, what);
     return counts;
 }
 

@@ -169,17 +169,24 @@ bool CpuRenderer<T>::draw(const Scene& scene, const View<T>& view, const Window&
             sort_and_schedule(view, options, plan.split, stats);
         }
     }
-    t = Clock::now();
-    rasterize(view, options, out);
-    stats.stage_ms[Stage::rasterize] += elapsed_ms(t);
-    t = Clock::now();
-    merge(view, options, out);
-    stats.stage_ms[Stage::merge] += elapsed_ms(t);
+    draw_tasks(view, options, out, stats);
     stats.pairs = rendered_pairs_;
     stats.tasks = tasks_.size();
     stats.split_tasks = split_tasks_;
     stats.longest_list = longest_list_;
     return false;
+}
+
+// Rasterize and merge, timed: the pixels of the task list in place (a frame's, or a band's).
+template <typename T>
+void CpuRenderer<T>::draw_tasks(const View<T>& view, const RenderOptions& options, const FrameOutput& out,
+                                FrameStats& stats) {
+    auto t = Clock::now();
+    rasterize(view, options, out);
+    stats.stage_ms[Stage::rasterize] += elapsed_ms(t);
+    t = Clock::now();
+    merge(view, options, out);
+    stats.stage_ms[Stage::merge] += elapsed_ms(t);
 }
 
 // Sort, tile ranges and the task list, timed: what key frames and re-sorting cached frames

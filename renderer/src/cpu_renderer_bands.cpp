@@ -112,12 +112,7 @@ void CpuRenderer<T>::render_bands(const Scene& scene, const View<T>& view, const
         keys(scene, window, options.culling);
         stats.stage_ms[Stage::keys] += elapsed_ms(t);
         sort_and_schedule(view, options, may_split, stats);
-        t = Clock::now();
-        rasterize(view, options, out);
-        stats.stage_ms[Stage::rasterize] += elapsed_ms(t);
-        t = Clock::now();
-        merge(view, options, out);
-        stats.stage_ms[Stage::merge] += elapsed_ms(t);
+        draw_tasks(view, options, out, stats);
         pairs += rendered_pairs_;
         split_tasks += split_tasks_;
         longest_list = std::max(longest_list, longest_list_);

@@ -9,6 +9,7 @@
 #include <random>
 #include <vector>
 
+#include "../occlusion_paths.hpp"
 #include "../test_util.hpp"
 #include "catgs/occlusion_tracker.hpp"
 #include "cuda_renderer.hpp"
@@ -25,29 +26,11 @@ protected:
     }
 };
 
-/// A camera at `centre` turned by `yaw` radians about the vertical axis.
-Camera turned_camera(int width, int height, std::array<double, 3> centre, double yaw) {
-    Camera c = test::forward_camera(width, height, 70.0, centre);
-    const double s = std::sin(yaw), k = std::cos(yaw);
-    c.pose = pose_from_centre(centre, {k, 0, -s, 0, 1, 0, s, 0, k});
-    return c;
-}
-
-/// A glide (small steps and turns: the cut should hold), a jump sideways past the scene's edge
-/// (tiles that were opaque now see empty space: the cut must miss and the frame be drawn
-/// again), a turn too wide for the cut, and a glide again.
 std::vector<Camera> occlusion_path(int width, int height) {
-    std::vector<Camera> path;
-    for (int f = 0; f < 8; ++f) path.push_back(turned_camera(width, height, {0.02 * f, 0.01 * f, 0.03 * f}, 0.001 * f));
-    path.push_back(turned_camera(width, height, {4.5, 0.0, 0.2}, 0.0));
-    path.push_back(turned_camera(width, height, {4.5, 0.0, 0.2}, 0.3));
-    for (int f = 0; f < 4; ++f) path.push_back(turned_camera(width, height, {4.5 - 0.02 * f, 0.0, 0.2}, 0.3));
-    return path;
+    return test::occlusion::path(width, height);
 }
 
-struct PathCounts {
-    std::uint64_t occluded = 0, redrawn = 0, frames_cut = 0;
-};
+using test::occlusion::PathCounts;
 
 /// Renders the path with the cut on and off, one renderer each, and asserts every frame equal.
 PathCounts compare_path(const Scene& scene, const std::vector<Camera>& path, RenderOptions options,
@@ -68,27 +51,14 @@ PathCounts compare_path(const Scene& scene, const std::vector<Camera>& path, Ren
         const std::string frame = what + ", frame " + std::to_string(f);
         EXPECT_EQ(a8.rgb, b8.rgb) << frame;
         EXPECT_EQ(af.rgb, bf.rgb) << frame;
-        EXPECT_EQ(b.occluded, 0u) << frame;
-        EXPECT_FALSE(b.occlusion_redrawn) << frame;
-        if (!a.occlusion_redrawn) {
-            EXPECT_EQ(a.pairs + a.occluded_pairs, b.pairs) << frame;
-        }
-        counts.occluded += a.occluded;
-        counts.redrawn += a.occlusion_redrawn;
-        counts.frames_cut += a.occluded > 0;
+        test::occlusion::check_frame(a, b, frame, counts);
     }
-    std::cout << "[occlusion] " << what << ": " << counts.frames_cut << " of " << path.size() << " frames cut, "
-              << counts.occluded << " Gaussians left out, " << counts.redrawn << " redrawn" << std::endl;
+    test::occlusion::report(counts, what);
     return counts;
 }
 
 test::RandomSceneParams dense_scene() {
-    test::RandomSceneParams p;
-    p.count = 150000;
-    p.extent = 3.0;
-    p.log_scale_min = -3.5;
-    p.log_scale_max = -1.5;
-    return p;
+    return test::occlusion::dense_scene(150000);
 }
 
 TEST_F(CudaOcclusionTest, EveryFrameIsTheFullListsImageWhetherTheCutHeldOrMissed) {

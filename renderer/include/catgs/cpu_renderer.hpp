@@ -116,6 +116,7 @@ private:
     void sort_and_schedule(const View<T>& view, const RenderOptions& options, bool may_split, FrameStats& stats);
     void rasterize(const View<T>& view, const RenderOptions& options, const FrameOutput& out);
     void merge(const View<T>& view, const RenderOptions& options, const FrameOutput& out);
+    void draw_tasks(const View<T>& view, const RenderOptions& options, const FrameOutput& out, FrameStats& stats);
     KeyFrameSummary summarize(const Scene& scene, const Window& window, Culling culling) const;
 
     /// Over the pair budget (cpu_renderer_bands.cpp): the tile rows split so that each band's
