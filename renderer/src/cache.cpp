@@ -33,10 +33,6 @@ double frame_interval(const std::deque<Camera>& history) {
     return dt > 0 && std::isfinite(dt) ? dt : kDefaultFrameInterval;
 }
 
-bool same_intrinsics(const Intrinsics& a, const Intrinsics& b) {
-    return a.width == b.width && a.height == b.height && a.fx == b.fx && a.fy == b.fy && a.cx == b.cx && a.cy == b.cy;
-}
-
 /// The largest |x/z| or |y/z| inside the projection's Jacobian clamp region.
 double max_tangent(const Intrinsics& k) {
     const double slack = kJacobianClampFactor - 1.0;

@@ -32,6 +32,10 @@ void validate(const Intrinsics& k, const std::string& what) {
     if (!(std::isfinite(k.cx) && std::isfinite(k.cy))) throw Error(what + ": principal point must be finite");
 }
 
+bool same_intrinsics(const Intrinsics& a, const Intrinsics& b) {
+    return a.width == b.width && a.height == b.height && a.fx == b.fx && a.fy == b.fy && a.cx == b.cx && a.cy == b.cy;
+}
+
 std::array<double, 3> camera_centre(const Pose& p) {
     const auto& r = p.rotation;
     const auto& t = p.translation;

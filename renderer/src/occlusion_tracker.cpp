@@ -6,14 +6,6 @@
 #include "catgs/cache.hpp"
 
 namespace catgs {
-namespace {
-
-bool same_intrinsics(const Intrinsics& a, const Intrinsics& b) {
-    return a.width == b.width && a.height == b.height && a.fx == b.fx && a.fy == b.fy && a.cx == b.cx && a.cy == b.cy;
-}
-
-}  // namespace
-
 std::optional<OcclusionMotion> OcclusionTracker::plan(const Camera& now, bool eligible) {
     if (!recorded_) return std::nullopt;
     if (skip_ > 0) {
@@ -49,13 +41,8 @@ std::vector<float> occlusion_cells(const std::vector<float>& recorded, const Occ
                 predicted_cut(recorded.data(), p.width[0], p.height[0], x, y, motion);
     for (int l = 1; l < p.levels; ++l)
         for (int y = 0; y < p.height[l]; ++y)
-            for (int x = 0; x < p.width[l]; ++x) {
-                float deepest = -INFINITY;
-                for (int by = 2 * y; by < std::min(2 * y + 2, p.height[l - 1]); ++by)
-                    for (int bx = 2 * x; bx < std::min(2 * x + 2, p.width[l - 1]); ++bx)
-                        deepest = std::max(deepest, cells[static_cast<std::size_t>(p.at(l - 1, bx, by))]);
-                cells[static_cast<std::size_t>(p.at(l, x, y))] = deepest;
-            }
+            for (int x = 0; x < p.width[l]; ++x)
+                cells[static_cast<std::size_t>(p.at(l, x, y))] = pyramid_cell(p, cells.data(), l, x, y);
     return cells;
 }
 

@@ -35,6 +35,10 @@ Intrinsics intrinsics_from_fov(int width, int height, double fov_x_degrees);
 /// finite and positive, and the principal point finite.
 void validate(const Intrinsics& intrinsics, const std::string& what);
 
+/// Whether two cameras make the same image grid and projection (every field equal): what a
+/// cost measured, or a tile record made, at one holds at the other.
+bool same_intrinsics(const Intrinsics& a, const Intrinsics& b);
+
 /// Camera centre in world coordinates: -R^T t.
 std::array<double, 3> camera_centre(const Pose& pose);
 
