@@ -18,14 +18,7 @@ __global__ void occlusion_level_kernel(OcclusionPyramid p, int level, float* cel
     const int cell = static_cast<int>(blockIdx.x * blockDim.x + threadIdx.x);
     const int w = p.width[level];
     if (cell >= w * p.height[level]) return;
-    const int x = cell % w, y = cell / w, below = level - 1;
-    float deepest = -INFINITY;
-    for (int dy = 0; dy < 2; ++dy)
-        for (int dx = 0; dx < 2; ++dx) {
-            const int bx = 2 * x + dx, by = 2 * y + dy;
-            if (bx < p.width[below] && by < p.height[below]) deepest = fmaxf(deepest, cells[p.at(below, bx, by)]);
-        }
-    cells[p.at(level, x, y)] = deepest;
+    cells[p.at(level, cell % w, cell / w)] = pyramid_cell(p, cells, level, cell % w, cell / w);
 }
 
 }  // namespace

@@ -67,6 +67,18 @@ CATGS_HD inline OcclusionPyramid occlusion_pyramid(int tiles_x, int tiles_y) {
     return p;
 }
 
+/// Cell (x, y) of `level` (>= 1): the max of the 2x2 cells below it that exist.
+CATGS_HD inline float pyramid_cell(const OcclusionPyramid& p, const float* cells, int level, int x, int y) {
+    const int below = level - 1;
+    float deepest = -INFINITY;
+    for (int by = 2 * y; by < 2 * y + 2 && by < p.height[below]; ++by)
+        for (int bx = 2 * x; bx < 2 * x + 2 && bx < p.width[below]; ++bx) {
+            const float c = cells[p.at(below, bx, by)];
+            deepest = c > deepest ? c : deepest;
+        }
+    return deepest;
+}
+
 /// The deepest predicted cut over the tiles of `rect` (not empty, inside the grid), or more:
 /// read at the lowest level where the rectangle spans at most 2x2 cells.
 CATGS_HD inline float cut_over_rect(const OcclusionPyramid& p, const float* cuts, TileRect rect) {
