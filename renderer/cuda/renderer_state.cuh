@@ -1,5 +1,6 @@
 // The state of one CudaRenderer (its Impl) and of the frame being rendered (Frame), shared
-// by cuda_renderer.cu, which runs the passes, and stage_readback.cu.
+// by cuda_renderer.cu, which runs the passes, and the files that hold some of them:
+// stage_readback.cu, frame_occlusion.cu and frame_bands.cu.
 #pragma once
 
 #include <cuda_runtime_api.h>
