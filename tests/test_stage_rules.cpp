@@ -182,6 +182,8 @@ TEST(FramePlanner, ACachedFrameThatWouldResortWithoutTheEmissionOrderIsAKeyFrame
 // graphdeco's per-pixel rule as plain branches, the way its renderer reads: skip a power
 // above 0 or an alpha below 1/255, clamp alpha at 0.99, stop (drawing nothing) where T would
 // fall below the threshold. blend_power_unless_done is the same rule as straight-line code.
+// One rounding is catgs', not graphdeco's: the next T is T - alpha T (sharing the colour's
+// weight), not T (1 - alpha), an ulp of T apart.
 template <typename T>
 void branchy_blend(PixelAccumulator<T>& acc, T power, T opacity, Vec3<T> c, T min_t) {
     if (acc.done) return;
@@ -189,12 +191,12 @@ void branchy_blend(PixelAccumulator<T>& acc, T power, T opacity, Vec3<T> c, T mi
     T alpha = opacity * std::exp(power);
     if (!(alpha >= static_cast<T>(kMinAlpha))) return;
     if (alpha > static_cast<T>(kMaxAlpha)) alpha = static_cast<T>(kMaxAlpha);
-    const T next = acc.transmittance * (T(1) - alpha);
+    const T w = alpha * acc.transmittance;
+    const T next = acc.transmittance - w;
     if (next < min_t) {
         acc.done = true;
         return;
     }
-    const T w = alpha * acc.transmittance;
     acc.colour = {acc.colour.x + c.x * w, acc.colour.y + c.y * w, acc.colour.z + c.z * w};
     acc.transmittance = next;
 }
