@@ -12,14 +12,12 @@ namespace catgs::cuda {
 namespace {
 
 /// What the rasterizer reads of one Gaussian, staged in shared memory, with its conic in
-/// AlphaMath's domain and the warp blocks its visible box reaches. Aligned so that a warp reads
-/// it with 16-byte loads (3 in float, not 10 of 4 bytes): the kernel is bound by the
-/// instructions it issues.
+/// AlphaMath's domain. Aligned so that a warp reads it with 16-byte loads (3 in float, not 9 of
+/// 4 bytes): the kernel is bound by the instructions it issues.
 template <typename T>
 struct alignas(16) Splat {
     Vec2<T> mean;
     Vec3<T> conic;
-    std::uint32_t reaches;  // bit w: the visible box reaches a pixel centre of warp block w
     T opacity;
     Vec3<T> colour;
 };
@@ -69,8 +67,11 @@ struct AlphaMath<float> {
 // The 16x16 tile as eight 8x4 warp blocks, 2 across and 4 down. While a batch is staged, the
 // thread staging a Gaussian also records which blocks its 1/255 box reaches (not in exact
 // mode); a warp then walks only the Gaussians that reach one of its blocks, found 32 at a time
-// with one ballot, and shades only the blocks they reach. A skipped Gaussian has alpha < 1/255
-// at every pixel of the block, so the image is the one the full walk draws.
+// with one ballot. A skipped Gaussian has alpha < 1/255 at every pixel of the block, so the
+// image is the one the full walk draws. A walked Gaussian is shaded on all of the warp's blocks,
+// reached or not (an unreached block's blend draws nothing): a branch per block kept the two
+// pixels' blends apart, and interleaved they hide each other's latency; with the branch the
+// frames took 4-8% longer on every kit path (H100, 2026-12-06).
 constexpr int kWarpBlockW = 8, kWarpBlockH = 4, kWarpBlocks = kTilePixels / 32;
 static_assert(kTileSize == 16 && kWarpBlocks == 8 && kWarpBlockW * kWarpBlockH == 32,
               "the warp blocks must tile the 16x16 tile: 2 across, 4 down");
@@ -102,8 +103,7 @@ constexpr int kBatch = kTilePixels;
 
 /// How a task's pixels reach threads: each thread owns pixel (lane % 8, lane / 8) of Pixels
 /// warp blocks, so that a Gaussian's fetch from shared memory and its walk are paid once for
-/// Pixels pixels, and which of them a Gaussian reaches is the same for the whole warp (a
-/// uniform branch). Warp w owns blocks w * Pixels .. w * Pixels + Pixels - 1: with 2 a 16x4
+/// Pixels pixels. Warp w owns blocks w * Pixels .. w * Pixels + Pixels - 1: with 2 a 16x4
 /// strip, one row of blocks, whose two pixels a thread share their dy terms.
 template <int Pixels>
 struct PixelLayout {
@@ -114,7 +114,6 @@ struct PixelLayout {
     int first_col, first_row;  // the warp's first warp block, in block columns and rows
     __device__ explicit PixelLayout(int warp)
         : first_col(Pixels == 1 ? warp % 2 : 0), first_row(Pixels == 1 ? warp / 2 : warp * Pixels / 2) {}
-    __device__ int block(int b) const { return (first_row + b / kCols) * 2 + first_col + b % kCols; }
 };
 
 /// The tile and sub-task index of block `block`; false for a block past the tasks that exist.
@@ -179,7 +178,7 @@ __global__ void __launch_bounds__(PixelLayout<Pixels>::kThreads, resident_blocks
     constexpr int kThreads = Layout::kThreads, kStaged = kBatch / kThreads;
     constexpr unsigned kAll = 0xffffffffu;
     __shared__ Splat<T> batch[kBatch];
-    __shared__ std::uint8_t reaches[kBatch];  // the same bits, where a ballot reads them without bank conflicts
+    __shared__ std::uint8_t reaches[kBatch];  // bit w: the Gaussian's 1/255 box reaches a pixel centre of warp block w
     // Per warp: how far into the list its pixels were all done (kNotDone: not yet), for the
     // occlusion cut's check and record (stop_depth).
     __shared__ std::uint32_t warp_done[kThreads / 32];
@@ -231,7 +230,7 @@ __global__ void __launch_bounds__(PixelLayout<Pixels>::kThreads, resident_blocks
             if (idx >= end) break;
             const Projected<T>& p = projected[values[idx]];
             const std::uint32_t bits = grid.warp_skip ? blocks_reached(p, tile_x, tile_y) : 0xffu;
-            batch[at] = Splat<T>{p.mean, AlphaMath<T>::staged_conic(p.conic), bits, p.opacity, p.colour};
+            batch[at] = Splat<T>{p.mean, AlphaMath<T>::staged_conic(p.conic), p.opacity, p.colour};
             reaches[at] = static_cast<std::uint8_t>(bits);
             if (CheckCut) depths[at] = p.key_depth;
         }
@@ -255,7 +254,6 @@ __global__ void __launch_bounds__(PixelLayout<Pixels>::kThreads, resident_blocks
                     for (int r = 0; r < Layout::kRows; ++r) rows[r] = AlphaMath<T>::row(s, py[r]);
 #pragma unroll
                     for (int b = 0; b < Pixels; ++b) {
-                        if (!(s.reaches >> layout.block(b) & 1u)) continue;  // uniform: the warp skips it
                         const T power = AlphaMath<T>::power(s, px[b % Layout::kCols], rows[b / Layout::kCols]);
                         // blend's tests decide (its power <= 0 holds in either domain); in float only
                         // rounding at alpha = 1/255 and the hardware exp's last bits can differ.
