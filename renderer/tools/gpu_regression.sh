@@ -8,6 +8,7 @@
 #      through catgs-server are no substitute: the client's wall-clock timestamps feed the
 #      planner's pose prediction, so two runs of one binary choose different key frames.
 # Usage: gpu_regression.sh BEFORE_BIN AFTER_BIN KIT_DIR SCENE_DIR OUT_DIR
+#   Both bundles must digest alike: catgs-bench's digest changed on 2026-12-06 (docs/tools.md).
 #   BEFORE_BIN, AFTER_BIN: bin/ folders of deploy/bundle.sh bundles (catgs-bench; AFTER_BIN also
 #   catgs_gpu_tests). SCENE_DIR: bench.py --prep-catgs output, made here when missing.
 # Env: TAGS (trajectory tags), WARMUP (default 30, as the kit), GPU_TESTS=0 skips step 1,
