@@ -104,9 +104,9 @@ struct Result {
 // end: enough to tell two renders apart when a change must leave every pixel as it was
 // (renderer/tools/gpu_regression.sh compares them). Byte by byte, one dependent multiply a
 // byte, it took about 30 ms a 4K frame (this development machine) and made a digesting
-// benchmark run about four times longer on the GPU machine; the lanes take a fifth. Every step is a bijection of its
-// lane, so one changed word always changes the digest. Digests before 2026-12-06 were bytewise FNV-1a: compare only
-// bundles built on the same side of that change.
+// benchmark run about four times longer on the GPU machine; the lanes take a fifth. Every step
+// is a bijection of its lane, so one changed word always changes the digest. Digests before
+// 2026-12-06 were bytewise FNV-1a: compare only bundles built on the same side of that change.
 std::string image_digest(const catgs::ImageRGB8& image) {
     constexpr std::uint64_t kOffset = 14695981039346656037ull, kPrime = 1099511628211ull;
     constexpr int kLanes = 4, kShift = 29;  // the shift folds high bits down, which the multiply never does
