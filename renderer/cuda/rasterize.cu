@@ -71,7 +71,7 @@ struct AlphaMath<float> {
 // image is the one the full walk draws. A walked Gaussian is shaded on all of the warp's blocks,
 // reached or not (an unreached block's blend draws nothing): a branch per block kept the two
 // pixels' blends apart, and interleaved they hide each other's latency; with the branch the
-// frames took 4-8% longer on every kit path (H100, 2026-12-06).
+// frames took 3-8% longer on every kit path (H100, 2026-12-06).
 constexpr int kWarpBlockW = 8, kWarpBlockH = 4, kWarpBlocks = kTilePixels / 32;
 static_assert(kTileSize == 16 && kWarpBlocks == 8 && kWarpBlockW * kWarpBlockH == 32,
               "the warp blocks must tile the 16x16 tile: 2 across, 4 down");
