@@ -110,7 +110,8 @@ struct Result {
 std::string image_digest(const catgs::ImageRGB8& image) {
     constexpr std::uint64_t kOffset = 14695981039346656037ull, kPrime = 1099511628211ull;
     constexpr int kLanes = 4, kShift = 29;  // the shift folds high bits down, which the multiply never does
-    std::uint64_t lanes[kLanes] = {kOffset, kOffset + 1, kOffset + 2, kOffset + 3};
+    std::uint64_t lanes[kLanes];
+    for (int k = 0; k < kLanes; ++k) lanes[k] = kOffset + k;  // a start a lane: FNV's offset, +1, +2, ...
     const std::uint8_t* bytes = image.rgb.data();
     const std::size_t size = image.rgb.size();
     std::size_t at = 0;
@@ -472,7 +473,6 @@ int main(int argc, char** argv) {
     app.add_flag("--quiet", o.quiet, "no progress output on stderr");
     app.add_flag("--image-digests", o.image_digests,
                  "add each frame's image digest (64 bits, FNV-1a steps over the 8-bit RGB's words) to --json-out, to "
-                 "check that a change "
-                 "leaves every image bit-identical");
+                 "check that a change leaves every image bit-identical");
     return catgs::run_command_line(app, argc, argv, "catgs-bench", [&] { return run(o); });
 }
