@@ -277,6 +277,48 @@ TEST(Blend, StraightLineCodeIsGraphdecosBranchyRule) {
     check_straight_line_blend<double>("blend-double");
 }
 
+// The CUDA float rasterizer's alpha (blend_alpha_folded, the opacity's log2 added to the
+// exponent in base 2) against blend_alpha in double: the same visibility away from its two
+// edges, and alpha within the float exponent's rounding.
+TEST(Blend, FoldedOpacityAlphaIsBlendAlpha) {
+    std::mt19937_64 rng(test::fresh_seed("blend-folded"));
+    std::uniform_real_distribution<double> unit(0.0, 1.0);
+    const double log2e = 1.0 / std::log(2.0);
+    const auto exp2f_ = [](float v) { return std::exp2(v); };
+    int visible = 0, hidden = 0;
+    for (int i = 0; i < 200000; ++i) {
+        const double opacity = i % 50 == 0 ? 0.0 : unit(rng);
+        // Powers from the peak (and a little past it, where a rounded quadratic form can land)
+        // to well below the 1/255 edge.
+        const double power = 0.05 - 8.0 * unit(rng);
+        const BlendAlpha<double> want = blend_alpha(power, opacity, [](double v) { return std::exp(v); });
+        const float log2_opacity = std::log2(static_cast<float>(opacity));
+        const float folded = static_cast<float>(power * log2e) + log2_opacity;
+        const BlendAlpha<float> got = blend_alpha_folded(folded, log2_opacity, exp2f_);
+        const double raw = opacity * std::exp(power);
+        const bool near_edge = std::abs(power) < 1e-5 || std::abs(raw / kMinAlpha - 1.0) < 1e-5;
+        if (!near_edge) {
+            ASSERT_EQ(got.visible, want.visible) << "opacity " << opacity << " power " << power;
+        }
+        if (got.visible && want.visible) {
+            ASSERT_NEAR(got.alpha, want.alpha, 4e-6 * want.alpha) << "opacity " << opacity << " power " << power;
+            ++visible;
+        } else {
+            ++hidden;
+        }
+        if (opacity == 0.0) {
+            ASSERT_FALSE(got.visible) << "opacity 0 draws";
+        }
+    }
+    EXPECT_GT(visible, 50000);
+    EXPECT_GT(hidden, 50000);
+    const float nan = std::numeric_limits<float>::quiet_NaN(), inf = std::numeric_limits<float>::infinity();
+    for (const float folded : {nan, inf, -inf, 1.0f})
+        EXPECT_FALSE(blend_alpha_folded(folded, std::log2(0.5f), exp2f_).visible) << folded;
+    EXPECT_FALSE(blend_alpha_folded(-inf, -inf, exp2f_).visible) << "opacity 0 at the peak";
+    EXPECT_EQ(blend_alpha_folded(0.0f, 0.0f, exp2f_).alpha, static_cast<float>(kMaxAlpha)) << "clamped at the peak";
+}
+
 TEST(CpuRendererPartials, MergeToTheSplitTilesPixels) {
     const Scene scene = test::random_scene(test::fresh_seed("partials"));
     const Camera camera = test::forward_camera(64, 48, 60.0);

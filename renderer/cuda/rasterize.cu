@@ -11,9 +11,9 @@
 namespace catgs::cuda {
 namespace {
 
-/// What the rasterizer reads of one Gaussian, staged in shared memory, with its conic in
-/// AlphaMath's domain. Aligned so that a warp reads it with 16-byte loads (3 in float, not 9 of
-/// 4 bytes): the kernel is bound by the instructions it issues.
+/// What the rasterizer reads of one Gaussian, staged in shared memory, with its conic and
+/// opacity in AlphaMath's domain. Aligned so that a warp reads it with 16-byte loads (3 in
+/// float, not 9 of 4 bytes): the kernel is bound by the instructions it issues.
 template <typename T>
 struct alignas(16) Splat {
     Vec2<T> mean;
@@ -23,44 +23,48 @@ struct alignas(16) Splat {
 };
 
 /// alpha's exponent and exponential. Double, the reference precision, keeps the reference's
-/// own math (gaussian_power, the exact exp). Float works in base 2: the conic is staged
-/// pre-multiplied by -log2(e)/2 (-log2(e) off the diagonal), so that alpha's exponential is one
-/// ex2, the instruction __expf issues after its own multiply by log2(e), and the exponent's
-/// terms in dy are taken once a row of pixels (Row), leaving 3 flops a pixel. ex2.approx.ftz
-/// is within 2^-22 relative; with the pre-scaling's roundings the exponent is within a few ulp
-/// of log2(e) times the reference's, so alpha is within about 1e-6 relative on the powers
-/// that can reach 1/255, far below the 8-bit output's 2e-3.
+/// own math (gaussian_power, the exact exp). Float works in base 2 with the opacity folded in
+/// (blend_alpha_folded): the conic is staged pre-multiplied by -log2(e)/2 (-log2(e) off the
+/// diagonal) and the opacity as its log2, which joins the exponent's terms in dy, taken once a
+/// row of pixels (Row). That leaves 3 flops and one ex2 a pixel, no multiply by the opacity.
+/// ex2.approx.ftz is within 2^-22 relative and lg2.approx within 2^-22 absolute; with the
+/// pre-scaling's roundings the exponent is within a few ulp of the reference's, so alpha is
+/// within about 1e-6 relative on the powers that can reach 1/255, far below the 8-bit output's
+/// 2e-3.
 template <typename T>
 struct AlphaMath {
     struct Row {
         T py;
     };
     __device__ static Vec3<T> staged_conic(Vec3<T> conic) { return conic; }
+    __device__ static T staged_opacity(T opacity) { return opacity; }
     __device__ static Row row(const Splat<T>&, T py) { return {py}; }
-    __device__ static T power(const Splat<T>& s, T px, Row r) { return gaussian_power(s.mean, s.conic, px, r.py); }
-    __device__ T operator()(T power) const { return exp_of(power); }
+    __device__ static BlendAlpha<T> alpha(const Splat<T>& s, T px, Row r) {
+        return blend_alpha(gaussian_power(s.mean, s.conic, px, r.py), s.opacity, [](T v) { return exp_of(v); });
+    }
 };
 template <>
 struct AlphaMath<float> {
     static constexpr float kLog2E = 1.4426950408889634f;
     struct Row {
-        float cy_dy, cz_dy2;
+        float cy_dy, cz_dy2_log2_opacity;
     };
     __device__ static Vec3<float> staged_conic(Vec3<float> c) {
         return {-0.5f * kLog2E * c.x, -kLog2E * c.y, -0.5f * kLog2E * c.z};
     }
+    __device__ static float staged_opacity(float opacity) { return __log2f(opacity); }  // 0 -> -inf
     __device__ static Row row(const Splat<float>& s, float py) {
         const float dy = s.mean.y - py;
-        return {s.conic.y * dy, s.conic.z * dy * dy};
+        return {s.conic.y * dy, fmaf(s.conic.z * dy, dy, s.opacity)};
     }
-    __device__ static float power(const Splat<float>& s, float px, Row r) {
+    __device__ static BlendAlpha<float> alpha(const Splat<float>& s, float px, Row r) {
         const float dx = s.mean.x - px;
-        return fmaf(dx, fmaf(s.conic.x, dx, r.cy_dy), r.cz_dy2);
-    }
-    __device__ float operator()(float power) const {
-        float alpha_scale;
-        asm("ex2.approx.ftz.f32 %0, %1;" : "=f"(alpha_scale) : "f"(power));
-        return alpha_scale;
+        const float folded = fmaf(dx, fmaf(s.conic.x, dx, r.cy_dy), r.cz_dy2_log2_opacity);
+        return blend_alpha_folded(folded, s.opacity, [](float v) {
+            float e;
+            asm("ex2.approx.ftz.f32 %0, %1;" : "=f"(e) : "f"(v));
+            return e;
+        });
     }
 };
 
@@ -230,7 +234,8 @@ __global__ void __launch_bounds__(PixelLayout<Pixels>::kThreads, resident_blocks
             if (idx >= end) break;
             const Projected<T>& p = projected[values[idx]];
             const std::uint32_t bits = grid.warp_skip ? blocks_reached(p, tile_x, tile_y) : 0xffu;
-            batch[at] = Splat<T>{p.mean, AlphaMath<T>::staged_conic(p.conic), p.opacity, p.colour};
+            batch[at] = Splat<T>{p.mean, AlphaMath<T>::staged_conic(p.conic), AlphaMath<T>::staged_opacity(p.opacity),
+                                 p.colour};
             reaches[at] = static_cast<std::uint8_t>(bits);
             if (CheckCut) depths[at] = p.key_depth;
         }
@@ -254,10 +259,10 @@ __global__ void __launch_bounds__(PixelLayout<Pixels>::kThreads, resident_blocks
                     for (int r = 0; r < Layout::kRows; ++r) rows[r] = AlphaMath<T>::row(s, py[r]);
 #pragma unroll
                     for (int b = 0; b < Pixels; ++b) {
-                        const T power = AlphaMath<T>::power(s, px[b % Layout::kCols], rows[b / Layout::kCols]);
-                        // blend's tests decide (its power <= 0 holds in either domain); in float only
-                        // rounding at alpha = 1/255 and the hardware exp's last bits can differ.
-                        blend_power_signed(acc[b], power, s.opacity, s.colour, threshold, AlphaMath<T>{});
+                        // blend's tests decide; in float only rounding at alpha = 1/255 and the
+                        // hardware exp's last bits can differ.
+                        blend_signed(acc[b], AlphaMath<T>::alpha(s, px[b % Layout::kCols], rows[b / Layout::kCols]),
+                                     s.colour, threshold);
                     }
                 }
             };

@@ -38,14 +38,29 @@ struct BlendAlpha {
     T alpha;
     bool visible;
 };
-template <typename T, typename ExpFn>
-CATGS_HD BlendAlpha<T> blend_alpha(T power, T opacity, ExpFn exp_fn) {
-    const T raw_alpha = opacity * exp_fn(power);
+/// The clamp and the two tests of blend_alpha, on an alpha already taken: `in_front` is the
+/// exponent's power <= 0 in whatever form the caller computed it.
+template <typename T>
+CATGS_HD BlendAlpha<T> clamp_alpha(T raw_alpha, bool in_front) {
     // Written so that NaN fails both tests: far off-screen means can make the quadratic form
     // inf - inf, and min(0.99, NaN) would otherwise draw a NaN alpha as 0.99. `&` rather than
     // `&&`: every operand is a comparison already made, nothing to short-circuit.
-    const bool visible = (power <= T(0)) & (raw_alpha >= static_cast<T>(kMinAlpha));
+    const bool visible = in_front & (raw_alpha >= static_cast<T>(kMinAlpha));
     return {raw_alpha < static_cast<T>(kMaxAlpha) ? raw_alpha : static_cast<T>(kMaxAlpha), visible};
+}
+
+template <typename T, typename ExpFn>
+CATGS_HD BlendAlpha<T> blend_alpha(T power, T opacity, ExpFn exp_fn) {
+    return clamp_alpha(opacity * exp_fn(power), power <= T(0));
+}
+
+/// blend_alpha in base 2 with the opacity folded into the exponent, as the CUDA float
+/// rasterizer stages it: `folded` = log2(e) * power + log2(opacity), so that alpha is one exp2
+/// and no multiply. power <= 0 reads folded <= log2(opacity). Opacity 0 (log2 = -inf) draws
+/// nothing; a NaN exponent fails both tests, as in blend_alpha.
+template <typename T, typename Exp2Fn>
+CATGS_HD BlendAlpha<T> blend_alpha_folded(T folded, T log2_opacity, Exp2Fn exp2_fn) {
+    return clamp_alpha(exp2_fn(folded), folded <= log2_opacity);
 }
 
 /// blend_gaussian with the power already computed, alpha's exponential taken by `exp_fn` (the
@@ -106,10 +121,8 @@ struct SignedPixel {
 /// is below any such threshold: it "stops" again, which writes nothing but the sign, and the
 /// done test needs no operand of its own. A stop negates a transmittance >= the threshold, or
 /// the starting 1, so it never reaches 0 (where -0 would read as not done).
-template <typename T, typename ExpFn>
-CATGS_HD void blend_power_signed(SignedPixel<T>& px, T power, T opacity, Vec3<T> colour, T min_transmittance,
-                                 ExpFn exp_fn) {
-    const BlendAlpha<T> a = blend_alpha(power, opacity, exp_fn);
+template <typename T>
+CATGS_HD void blend_signed(SignedPixel<T>& px, BlendAlpha<T> a, Vec3<T> colour, T min_transmittance) {
     const bool visible = a.visible;
     const T alpha = a.alpha;
     const T t = px.signed_transmittance;
@@ -121,6 +134,13 @@ CATGS_HD void blend_power_signed(SignedPixel<T>& px, T power, T opacity, Vec3<T>
         px.signed_transmittance = next;
     }
     if (stops) px.signed_transmittance = -fabs_of(t);  // t is never 0 or NaN here: one FADD on the GPU
+}
+
+/// blend_signed with alpha from the power (blend_alpha).
+template <typename T, typename ExpFn>
+CATGS_HD void blend_power_signed(SignedPixel<T>& px, T power, T opacity, Vec3<T> colour, T min_transmittance,
+                                 ExpFn exp_fn) {
+    blend_signed(px, blend_alpha(power, opacity, exp_fn), colour, min_transmittance);
 }
 
 /// blend_power_unless_done on a pixel not yet done; returns true when this Gaussian stopped it.
