@@ -129,11 +129,14 @@ CATGS_HD void blend_signed(SignedPixel<T>& px, BlendAlpha<T> a, Vec3<T> colour, 
     const T weight = alpha * t;  // shared with next, as in blend_power_unless_done
     const T next = t - weight;
     const bool stops = visible & (next < min_transmittance);
-    if (visible & !stops) {
+    const bool draws = visible & !stops;
+    if (draws)
         px.colour = {px.colour.x + colour.x * weight, px.colour.y + colour.y * weight, px.colour.z + colour.z * weight};
-        px.signed_transmittance = next;
-    }
-    if (stops) px.signed_transmittance = -fabs_of(t);  // t is never 0 or NaN here: one FADD on the GPU
+    // One select after the other, on the same value: as two guarded assignments ptxas kept the
+    // old and the new transmittance in two registers and copied between them, three moves a
+    // pixel and Gaussian (SASS, H100, 2026-12-06). t is never 0 or NaN at a stop: one FADD.
+    const T kept = stops ? -fabs_of(t) : t;
+    px.signed_transmittance = draws ? next : kept;
 }
 
 /// blend_signed with alpha from the power (blend_alpha).
