@@ -15,7 +15,9 @@
 #   catgs_gpu_tests). SCENE_DIR: bench.py --prep-catgs output, made here when missing.
 # Env: TAGS (trajectory tags), WARMUP (default 30, as the kit), GPU_TESTS=0 skips step 1,
 #   EXTRA_BINS (more bin/ folders, benchmarked beside the two: an A/B/C of candidate changes),
-#   BACKEND=cpu makes a dry run on a machine without a GPU.
+#   BACKEND=cpu makes a dry run on a machine without a GPU, PACK=FILE.tgz packs OUT_DIR into one
+#   file after every step (a device call returns a few files, and one cut off at its time limit
+#   keeps only what was packed).
 set -uo pipefail
 before=$1 after=$2 kit=$3 scenes=$4 out=$5
 mkdir -p "$out" "$scenes"
@@ -24,6 +26,7 @@ backend=${BACKEND:-cuda}  # cpu: a dry run of this script on a machine without a
 prep_extra=${PREP_EXTRA:-}  # e.g. '--n 20000 --frames 3' for a dry run
 t0=$(date +%s)
 el() { echo "[$(( $(date +%s) - t0 )) s]"; }
+pack() { [ -z "${PACK:-}" ] || { tar czf "$PACK.tmp" -C "$out" . && mv "$PACK.tmp" "$PACK"; }; }
 
 if [ ! -f "$scenes/manifest.json" ]; then
   echo "$(el) prep"
@@ -36,6 +39,7 @@ if [ "${GPU_TESTS:-1}" != 0 ]; then
   echo "$(el) GPU suite (after)"
   "$after/catgs_gpu_tests" --gtest_brief=1 > "$out/gpu_tests.log" 2>&1
   echo "gpu tests rc=$?"; grep -E '^\[  (PASSED|FAILED|SKIPPED)|FAILED' "$out/gpu_tests.log" | head -20
+  pack
 fi
 
 echo "$(el) bench"
@@ -51,8 +55,9 @@ for tag in $tags; do
       > "$out/bench_${side}_$tag.txt" 2>&1 || { echo "bench ${bins[$side]} $tag failed"; tail -3 "$out/bench_${side}_$tag.txt"; }
   done
   echo "$(el) $tag"
+  pack
 done
-python3 - "$out" "${#bins[@]}" $tags <<'EOF'
+{ python3 - "$out" "${#bins[@]}" $tags <<'EOF'
 import json, sys, os
 import statistics as st
 out, sides, tags = sys.argv[1], int(sys.argv[2]), sys.argv[3:]
@@ -87,4 +92,6 @@ for tag in tags:
 print("images (plain, work; before against after): bit-identical" if differ == 0 else
       "images (plain, work; before against after): %d frames DIFFER" % differ)
 EOF
+} | tee "$out/summary.txt"
+pack
 echo "$(el) done"
