@@ -15,17 +15,27 @@ namespace {
 // registers, every plain frame) runs in blocks of 128 at 7 an SM: 28 warps resident where 3
 // blocks of 256 held 24, and a block waits on fewer long footprints. keys fell 4-13% on the
 // kit's six paths (city_ring 4K 0.668 -> 0.641 ms, garden survey 1080p 0.387 -> 0.339; H200,
-// session 18, plain, 300 frames).
+// session 18, plain, 300 frames). Since the rows are dealt out (emit_rows_flat) it takes 80
+// registers and runs at 6 an SM: at 7 it spilled.
 template <typename T, int MaxWindow>
 struct KeysShape {
     static constexpr int kThreads = 256, kMinBlocks = 2;
 };
 template <>
 struct KeysShape<float, 1> {
-    static constexpr int kThreads = 128, kMinBlocks = 7;
+    static constexpr int kThreads = 128, kMinBlocks = 6;
 };
 
 constexpr unsigned kFullWarp = 0xffffffffu;
+
+/// The sum of `value` over lanes 0..lane (every lane of the warp takes part).
+__device__ inline int inclusive_warp_scan(int value, int lane) {
+    for (int d = 1; d < warpSize; d <<= 1) {
+        const int n = __shfl_up_sync(kFullWarp, value, d);
+        if (lane >= d) value += n;
+    }
+    return value;
+}
 
 /// One Gaussian's pairs of the single-pose predicate (for_each_touched_tile), by the whole warp:
 /// lane r takes rows y0 + r, y0 + 32 + r, ...; a warp scan of the row widths puts each row
@@ -43,11 +53,7 @@ __device__ void emit_rows_by_warp(const Projected<T>& g, std::uint32_t gaussian,
         const int ty = base + lane;
         const TileSpan s = ty < y1 ? footprint_row(g, culling, rect, ty, view, T(0), ellipse) : TileSpan{0, 0};
         const int width = s.x1 > s.x0 ? s.x1 - s.x0 : 0;
-        int through = width;  // inclusive scan of the widths
-        for (int d = 1; d < warpSize; d <<= 1) {
-            const int n = __shfl_up_sync(kFullWarp, through, d);
-            if (lane >= d) through += n;
-        }
+        const int through = inclusive_warp_scan(width, lane);
         const int total = __shfl_sync(kFullWarp, through, warpSize - 1);
         std::uint64_t at = slot + static_cast<std::uint64_t>(through - width);
         for (int tx = s.x0; tx < s.x1; ++tx, ++at)
@@ -56,6 +62,91 @@ __device__ void emit_rows_by_warp(const Projected<T>& g, std::uint32_t gaussian,
                 values[at] = gaussian;
             }
         slot += static_cast<std::uint64_t>(total);
+    }
+}
+
+/// The ellipse of lane `owner`'s Gaussian, for the lanes that walk its rows.
+template <typename T>
+__device__ EllipseRows<T> shuffled_ellipse(const EllipseRows<T>& e, int owner) {
+    EllipseRows<T> r;
+    r.mean_x = __shfl_sync(kFullWarp, e.mean_x, owner);
+    r.mean_y = __shfl_sync(kFullWarp, e.mean_y, owner);
+    r.a = __shfl_sync(kFullWarp, e.a, owner);
+    r.b = __shfl_sync(kFullWarp, e.b, owner);
+    r.level = __shfl_sync(kFullWarp, e.level, owner);
+    r.det = __shfl_sync(kFullWarp, e.det, owner);
+    r.half_y = __shfl_sync(kFullWarp, e.half_y, owner);
+    r.peak_dy = __shfl_sync(kFullWarp, e.peak_dy, owner);
+    r.inverse_a = __shfl_sync(kFullWarp, e.inverse_a, owner);
+    r.usable = __shfl_sync(kFullWarp, static_cast<int>(e.usable), owner) != 0;
+    return r;
+}
+
+/// The pairs of the warp's Gaussians that their own threads would emit (`mine`: at most
+/// thread_pairs of them), a tile row a lane: the rows of lane 0's Gaussian, then lane 1's, ...
+/// are dealt out 32 at a time, so a lane with a tall footprint no longer holds the warp while
+/// the others idle (a thread per Gaussian walked up to 64 rows of double square roots). Each
+/// row's pairs go where the thread's serial loop puts them: the Gaussian's first slot plus the
+/// widths of its rows above, which count (the same predicate) made its pairs add up to.
+template <typename T, typename Key>
+__device__ void emit_rows_flat(const Projected<T>* projected, std::uint64_t gaussian, bool mine, std::uint64_t slot,
+                               std::uint64_t end, std::uint64_t count, Culling culling, const View<T>& view,
+                               TileRows rows, Key* keys, std::uint32_t* values) {
+    const int lane = static_cast<int>(threadIdx.x % warpSize);
+    TileRect rect{0, 0, 0, 0};
+    EllipseRows<T> ellipse;
+    int y0 = 0, row_count = 0;
+    if (mine) {  // set up once, read by the lanes that walk the rows (for_each_window_tile's single pose)
+        const Projected<T>& g = projected[gaussian];
+        rect = tile_rect(g, culling, view.tiles_x, view.tiles_y);
+        y0 = rect.y0 > rows.begin ? rect.y0 : rows.begin;
+        const int y1 = rect.y1 < rows.end ? rect.y1 : rows.end;
+        if (!rect.empty() && y0 < y1) {
+            row_count = y1 - y0;
+            if (culling == Culling::opacity_aware) ellipse = EllipseRows<T>(g, opacity_level(g.opacity));
+        }
+    }
+    const int rows_through = inclusive_warp_scan(row_count, lane);
+    const int total_rows = __shfl_sync(kFullWarp, rows_through, warpSize - 1);
+    // The pairs of lower lanes' rows: where this Gaussian's first row starts in the flat walk.
+    const int own_pairs = mine ? static_cast<int>(count) : 0;
+    const int pairs_before = inclusive_warp_scan(own_pairs, lane) - own_pairs;
+    int walked_pairs = 0;                                      // of the flat rows before this round
+    for (int base = 0; base < total_rows; base += warpSize) {  // uniform across the warp
+        const int row = base + lane;
+        int owner = 0, last = warpSize - 1;  // the first lane whose rows reach past `row`
+        for (int half = warpSize / 2; half > 0; half /= 2) {
+            const int mid = (owner + last) / 2;
+            if (__shfl_sync(kFullWarp, rows_through, mid) > row)
+                last = mid;
+            else
+                owner = mid + 1;
+        }
+        const int owner_first_row = __shfl_sync(kFullWarp, rows_through - row_count, owner);
+        const int ty = __shfl_sync(kFullWarp, y0, owner) + (row - owner_first_row);
+        const TileRect owner_rect{__shfl_sync(kFullWarp, rect.x0, owner), __shfl_sync(kFullWarp, rect.y0, owner),
+                                  __shfl_sync(kFullWarp, rect.x1, owner), __shfl_sync(kFullWarp, rect.y1, owner)};
+        const EllipseRows<T> owner_ellipse =
+            culling == Culling::opacity_aware ? shuffled_ellipse(ellipse, owner) : EllipseRows<T>();
+        const std::uint64_t owner_gaussian = __shfl_sync(kFullWarp, gaussian, owner);
+        const TileSpan s = row < total_rows ? footprint_row(projected[owner_gaussian], culling, owner_rect, ty, view,
+                                                            T(0), owner_ellipse)
+                                            : TileSpan{0, 0};
+        const int width = s.x1 > s.x0 ? s.x1 - s.x0 : 0;
+        const int widths_through = inclusive_warp_scan(width, lane);
+        const std::uint64_t owner_slot = __shfl_sync(kFullWarp, slot, owner);
+        const std::uint64_t owner_end = __shfl_sync(kFullWarp, end, owner);
+        const int owner_pairs_before = __shfl_sync(kFullWarp, pairs_before, owner);
+        // Never negative while count and these rows agree; if they ever did not, no write
+        // lands before the Gaussian's first slot either.
+        const int offset = walked_pairs + widths_through - width - owner_pairs_before;
+        std::uint64_t at = owner_slot + static_cast<std::uint64_t>(offset > 0 ? offset : 0);
+        for (int tx = offset >= 0 ? s.x0 : s.x1; tx < s.x1; ++tx, ++at)
+            if (at < owner_end) {
+                keys[at] = static_cast<Key>(ty * view.tiles_x + tx);
+                values[at] = static_cast<std::uint32_t>(owner_gaussian);
+            }
+        walked_pairs += __shfl_sync(kFullWarp, widths_through, warpSize - 1);
     }
 }
 
@@ -93,7 +184,12 @@ __global__ void __launch_bounds__(KeysShape<T, MaxWindow>::kThreads, KeysShape<T
         // One pose whose geometry preprocess stored (bands: caching is off for them).
         // Exact culling emits one pair (tile 0) a Gaussian: never the warp's.
         const bool by_warp = count > thread_pairs && culling != Culling::exact;
-        if (count > 0 && !by_warp) for_each_touched_tile(projected[i], culling, views[0], emit, rows);
+        if (culling == Culling::exact) {
+            if (count > 0) for_each_touched_tile(projected[i], culling, views[0], emit, rows);
+        } else {
+            emit_rows_flat(projected, i, count > 0 && !by_warp, slot, end, count, culling, views[0], rows, keys,
+                           values);
+        }
         for (unsigned many = __ballot_sync(kFullWarp, by_warp); many != 0; many &= many - 1) {
             const int leader = __ffs(static_cast<int>(many)) - 1;
             const std::uint64_t gaussian = __shfl_sync(kFullWarp, i, leader);
