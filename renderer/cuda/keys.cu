@@ -153,8 +153,9 @@ __device__ void emit_rows_flat(const Projected<T>* projected, std::uint64_t gaus
 // Keys (tile ids) at each Gaussian's offset: thread k emits the k-th nearest slot, so the pairs
 // come out front to back, equal depths in slot order, and the stable sort by tile keeps that
 // order within each tile (sort.cuh). `capacity` bounds every write. In the single-pose case a
-// Gaussian of more than `thread_pairs` pairs is emitted by its whole warp (KeysArgs), so every
-// lane reaches the ballot.
+// Gaussian of more than `thread_pairs` pairs is emitted by its whole warp (KeysArgs) and the
+// others' rows are dealt out to its lanes (emit_rows_flat), so every lane, past `ordered` too,
+// reaches the ballot and the shuffles.
 template <typename T, int MaxWindow, typename Key>
 __global__ void __launch_bounds__(KeysShape<T, MaxWindow>::kThreads, KeysShape<T, MaxWindow>::kMinBlocks)
     keys_kernel(DeviceSceneView scene, ChunkSpace space, const View<T>* views, int window, Culling culling, T guard,
