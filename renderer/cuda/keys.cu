@@ -15,15 +15,16 @@ namespace {
 // registers, every plain frame) runs in blocks of 128 at 7 an SM: 28 warps resident where 3
 // blocks of 256 held 24, and a block waits on fewer long footprints. keys fell 4-13% on the
 // kit's six paths (city_ring 4K 0.668 -> 0.641 ms, garden survey 1080p 0.387 -> 0.339; H200,
-// session 18, plain, 300 frames). Since the rows are dealt out (emit_rows_flat) it takes 80
-// registers and runs at 6 an SM: at 7 it spilled.
+// session 18, plain, 300 frames). Since the rows are dealt out (emit_rows_flat) the owners'
+// ellipses wait in shared memory (RowOwner), which keeps it at 68 registers and 7 an SM: with
+// them shuffled it took 80 and ran at 6 (7 spilled).
 template <typename T, int MaxWindow>
 struct KeysShape {
     static constexpr int kThreads = 256, kMinBlocks = 2;
 };
 template <>
 struct KeysShape<float, 1> {
-    static constexpr int kThreads = 128, kMinBlocks = 6;
+    static constexpr int kThreads = 128, kMinBlocks = 7;
 };
 
 constexpr unsigned kFullWarp = 0xffffffffu;
@@ -65,22 +66,14 @@ __device__ void emit_rows_by_warp(const Projected<T>& g, std::uint32_t gaussian,
     }
 }
 
-/// The ellipse of lane `owner`'s Gaussian, for the lanes that walk its rows.
+/// Where the lanes of a warp leave their Gaussian's rectangle and ellipse for the lanes that
+/// walk its rows: in shared memory, not shuffled, so that the ten doubles are neither held in
+/// registers across the walk nor moved by eighteen shuffles a round.
 template <typename T>
-__device__ EllipseRows<T> shuffled_ellipse(const EllipseRows<T>& e, int owner) {
-    EllipseRows<T> r;
-    r.mean_x = __shfl_sync(kFullWarp, e.mean_x, owner);
-    r.mean_y = __shfl_sync(kFullWarp, e.mean_y, owner);
-    r.a = __shfl_sync(kFullWarp, e.a, owner);
-    r.b = __shfl_sync(kFullWarp, e.b, owner);
-    r.level = __shfl_sync(kFullWarp, e.level, owner);
-    r.det = __shfl_sync(kFullWarp, e.det, owner);
-    r.half_y = __shfl_sync(kFullWarp, e.half_y, owner);
-    r.peak_dy = __shfl_sync(kFullWarp, e.peak_dy, owner);
-    r.inverse_a = __shfl_sync(kFullWarp, e.inverse_a, owner);
-    r.usable = __shfl_sync(kFullWarp, static_cast<int>(e.usable), owner) != 0;
-    return r;
-}
+struct RowOwner {
+    EllipseRows<T> ellipse;
+    TileRect rect;
+};
 
 /// The pairs of the warp's Gaussians that their own threads would emit (`mine`: at most
 /// thread_pairs of them), a tile row a lane: the rows of lane 0's Gaussian, then lane 1's, ...
@@ -91,21 +84,22 @@ __device__ EllipseRows<T> shuffled_ellipse(const EllipseRows<T>& e, int owner) {
 template <typename T, typename Key>
 __device__ void emit_rows_flat(const Projected<T>* projected, std::uint64_t gaussian, bool mine, std::uint64_t slot,
                                std::uint64_t end, std::uint64_t count, Culling culling, const View<T>& view,
-                               TileRows rows, Key* keys, std::uint32_t* values) {
+                               TileRows rows, RowOwner<T>* warp_owners, Key* keys, std::uint32_t* values) {
     const int lane = static_cast<int>(threadIdx.x % warpSize);
-    TileRect rect{0, 0, 0, 0};
-    EllipseRows<T> ellipse;
     int y0 = 0, row_count = 0;
     if (mine) {  // set up once, read by the lanes that walk the rows (for_each_window_tile's single pose)
         const Projected<T>& g = projected[gaussian];
-        rect = tile_rect(g, culling, view.tiles_x, view.tiles_y);
-        y0 = rect.y0 > rows.begin ? rect.y0 : rows.begin;
-        const int y1 = rect.y1 < rows.end ? rect.y1 : rows.end;
-        if (!rect.empty() && y0 < y1) {
+        RowOwner<T>& own = warp_owners[lane];
+        own.rect = tile_rect(g, culling, view.tiles_x, view.tiles_y);
+        y0 = own.rect.y0 > rows.begin ? own.rect.y0 : rows.begin;
+        const int y1 = own.rect.y1 < rows.end ? own.rect.y1 : rows.end;
+        if (!own.rect.empty() && y0 < y1) {
             row_count = y1 - y0;
-            if (culling == Culling::opacity_aware) ellipse = EllipseRows<T>(g, opacity_level(g.opacity));
+            own.ellipse =
+                culling == Culling::opacity_aware ? EllipseRows<T>(g, opacity_level(g.opacity)) : EllipseRows<T>();
         }
     }
+    __syncwarp();
     const int rows_through = inclusive_warp_scan(row_count, lane);
     const int total_rows = __shfl_sync(kFullWarp, rows_through, warpSize - 1);
     // The pairs of lower lanes' rows: where this Gaussian's first row starts in the flat walk.
@@ -124,13 +118,10 @@ __device__ void emit_rows_flat(const Projected<T>* projected, std::uint64_t gaus
         }
         const int owner_first_row = __shfl_sync(kFullWarp, rows_through - row_count, owner);
         const int ty = __shfl_sync(kFullWarp, y0, owner) + (row - owner_first_row);
-        const TileRect owner_rect{__shfl_sync(kFullWarp, rect.x0, owner), __shfl_sync(kFullWarp, rect.y0, owner),
-                                  __shfl_sync(kFullWarp, rect.x1, owner), __shfl_sync(kFullWarp, rect.y1, owner)};
-        const EllipseRows<T> owner_ellipse =
-            culling == Culling::opacity_aware ? shuffled_ellipse(ellipse, owner) : EllipseRows<T>();
         const std::uint64_t owner_gaussian = __shfl_sync(kFullWarp, gaussian, owner);
-        const TileSpan s = row < total_rows ? footprint_row(projected[owner_gaussian], culling, owner_rect, ty, view,
-                                                            T(0), owner_ellipse)
+        const RowOwner<T>& walked = warp_owners[owner];
+        const TileSpan s = row < total_rows ? footprint_row(projected[owner_gaussian], culling, walked.rect, ty, view,
+                                                            T(0), walked.ellipse)
                                             : TileSpan{0, 0};
         const int width = s.x1 > s.x0 ? s.x1 - s.x0 : 0;
         const int widths_through = inclusive_warp_scan(width, lane);
@@ -188,8 +179,12 @@ __global__ void __launch_bounds__(KeysShape<T, MaxWindow>::kThreads, KeysShape<T
         if (culling == Culling::exact) {
             if (count > 0) for_each_touched_tile(projected[i], culling, views[0], emit, rows);
         } else {
-            emit_rows_flat(projected, i, count > 0 && !by_warp, slot, end, count, culling, views[0], rows, keys,
-                           values);
+            // Raw storage: a __shared__ variable cannot have EllipseRows' constructor.
+            __shared__ alignas(
+                RowOwner<T>) unsigned char owner_bytes[KeysShape<T, MaxWindow>::kThreads * sizeof(RowOwner<T>)];
+            RowOwner<T>* warp_owners = reinterpret_cast<RowOwner<T>*>(owner_bytes) + threadIdx.x / warpSize * warpSize;
+            emit_rows_flat(projected, i, count > 0 && !by_warp, slot, end, count, culling, views[0], rows, warp_owners,
+                           keys, values);
         }
         for (unsigned many = __ballot_sync(kFullWarp, by_warp); many != 0; many &= many - 1) {
             const int leader = __ffs(static_cast<int>(many)) - 1;
