@@ -17,7 +17,8 @@ namespace {
 // kit's six paths (city_ring 4K 0.668 -> 0.641 ms, garden survey 1080p 0.387 -> 0.339; H200,
 // session 18, plain, 300 frames). Since the rows are dealt out (emit_rows_flat) the owners'
 // ellipses wait in shared memory (RowOwner), which keeps it at 68 registers and 7 an SM: with
-// them shuffled it took 80 and ran at 6 (7 spilled).
+// them shuffled it took 80 and ran at 6 (7 spilled), and keys was 3-4% slower on the kit's
+// paths (H100, session 33).
 template <typename T, int MaxWindow>
 struct KeysShape {
     static constexpr int kThreads = 256, kMinBlocks = 2;
