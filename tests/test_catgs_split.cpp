@@ -10,6 +10,7 @@
 #include "catgs/cache.hpp"
 #include "catgs/cpu_renderer.hpp"
 #include "catgs/split_choice.hpp"
+#include "catgs/stages/split.hpp"
 #include "test_util.hpp"
 
 namespace catgs {
@@ -47,6 +48,21 @@ TEST(CatgsSplit, SubtaskRangesFollowAlgorithmOne) {
     EXPECT_EQ(e, 1250u);
     subtask_range(0, 300, 100, 0, b, e);  // exact multiple: an empty first sub-task
     EXPECT_EQ(e - b, 0u);
+}
+
+// The GPU's task order starts a list first from kHeavyListFactor x the mean non-empty list on,
+// never an empty one, and nothing at factor 0 (row order).
+TEST(CatgsSplit, HeavyListsStartAtTheFactorTimesTheMean) {
+    // 10 non-empty lists of 1000 pairs in all: a mean of 100.
+    EXPECT_TRUE(runs_first(400, 1000, 10, kHeavyListFactor));
+    EXPECT_FALSE(runs_first(399, 1000, 10, kHeavyListFactor));
+    EXPECT_TRUE(runs_first(150, 1000, 10, 1.5));
+    EXPECT_FALSE(runs_first(149, 1000, 10, 1.5));
+    EXPECT_FALSE(runs_first(0, 0, 0, kHeavyListFactor));
+    EXPECT_FALSE(runs_first(1000000, 1000, 10, 0.0));
+    // Past 32 bits of pairs the product must not wrap: 3e9 pairs over 1e5 lists, a mean of 3e4.
+    EXPECT_TRUE(runs_first(120000, 3000000000ull, 100000, kHeavyListFactor));
+    EXPECT_FALSE(runs_first(119999, 3000000000ull, 100000, kHeavyListFactor));
 }
 
 TEST(CatgsSplit, TasksAreTilesPlusLabelledExtras) {

@@ -171,6 +171,7 @@ FrameStats CudaRenderer<T>::Impl::render(const Camera& camera, const RenderOptio
                      max_extra_tasks(f, f.total),
                      f.shared_list,
                      f.split_used,
+                     f.heavy_used,
                      f.bands.size() > 1,
                      host.counters.data()->tasks};
     planner.frame_rendered(f.plan, stats);
@@ -190,13 +191,17 @@ FrameStats CudaRenderer<T>::Impl::draw(Frame<T>& f, const HostOutputs& out) {
         if (f.plan.resort) {
             rekey(f);
             sort(f, f.total);
-            cached_split = ranges_and_split(f, f.total);
+            ranges_and_split(f, f.total);
+            cached_split = f.split_used;
+            cached_heavy = f.heavy_used;
+            cached_heavy = f.heavy_used;
         } else {
             // The key frame's lists and order as they are; the marks keep the stage times at 0.
             for (Event e : {Event::depth_order, Event::scan, Event::keys, Event::sort, Event::ranges, Event::split})
                 events.record(e, stream);
         }
         f.split_used = cached_split;
+        f.heavy_used = cached_heavy;
     }
     const PixelOutputs device = device_outputs(f, out);
     for (const TileRows& rows : f.bands) {
@@ -207,7 +212,7 @@ FrameStats CudaRenderer<T>::Impl::draw(Frame<T>& f, const HostOutputs& out) {
             if (f.bands.size() > 1) pairs = count_band(f, rows);
             keys(f, rows, pairs);
             sort(f, pairs);
-            f.split_used = ranges_and_split(f, pairs);
+            ranges_and_split(f, pairs);
             add_list_times(pass_start);
         }
         rasterize(f, rows, pairs, device);
@@ -446,9 +451,9 @@ void CudaRenderer<T>::Impl::sort(const Frame<T>& f, std::uint64_t pairs) {
     events.record(Event::sort, stream);
 }
 
-/// Ranges and the task list over the sorted pairs; returns whether tiles were split.
+/// Ranges and the task list over the sorted pairs: split tiles and heavy lists.
 template <typename T>
-bool CudaRenderer<T>::Impl::ranges_and_split(const Frame<T>& f, std::uint64_t pairs) {
+void CudaRenderer<T>::Impl::ranges_and_split(Frame<T>& f, std::uint64_t pairs) {
     const cudaStream_t s = stream;
     const CatgsOptions& catgs = f.options->catgs;
     TileBuffers& t = buffers.tiles;
@@ -457,19 +462,26 @@ bool CudaRenderer<T>::Impl::ranges_and_split(const Frame<T>& f, std::uint64_t pa
                    catgs.split_auto ? 0 : catgs.split_k, t.range_begin.data(), t.range_end.data(), task_counters()},
         s);
     events.record(Event::ranges, s);
-    // Exact culling shares one list, which this task layout does not split.
-    const bool split = f.splitting && !f.shared_list && pairs > 0;
-    if (split) {
-        const std::uint64_t max_extra = pairs / f.k_min + 1;
+    // Exact culling shares one list, which this task layout neither splits nor reorders.
+    const bool lists = !f.shared_list && pairs > 0;
+    f.split_used = f.splitting && lists;
+    const std::uint64_t room = lists ? heavy_room() : 0;
+    f.heavy_used = room > 0;
+    const std::uint64_t max_extra = max_extra_tasks(f, pairs);
+    if (f.split_used) {
         t.labels.reserve(max_extra, s);
         buffers.pixels.partials.reserve((max_extra + std::min<std::uint64_t>(f.tiles, max_extra)) * kTilePixels, s);
-        cuda::split(
-            SplitArgs{static_cast<std::uint32_t>(f.tiles), t.range_begin.data(), t.range_end.data(), max_extra,
-                      catgs.split_auto, task_counters(), t.split_slot.data(), t.labels.data(), t.split_tiles.data()},
-            s);
     }
+    if (f.heavy_used) {
+        t.heavy_tiles.reserve(room, s);
+        t.runs_first.reserve(f.tiles, s);
+    }
+    cuda::split(SplitArgs{static_cast<std::uint32_t>(f.tiles), t.range_begin.data(), t.range_end.data(), f.split_used,
+                          max_extra, catgs.split_auto, task_counters(), t.split_slot.data(), t.labels.data(),
+                          t.split_tiles.data(), limits.heavy_list_factor, static_cast<std::uint32_t>(room),
+                          t.heavy_tiles.data(), t.runs_first.data()},
+                stream);
     events.record(Event::split, s);
-    return split;
 }
 
 RasterLayout choose_raster_layout(std::uint64_t longest_list, std::uint64_t pairs, std::uint64_t resident_tasks) {
@@ -489,20 +501,29 @@ RasterLayout CudaRenderer<T>::Impl::raster_layout() {
     return choose_raster_layout(last.tasks.longest_list, last.pairs, two_pixel_tasks);
 }
 
-/// The band's tasks: its extra sub-tasks (bounded), then its tiles.
+template <typename T>
+std::uint64_t CudaRenderer<T>::Impl::heavy_room() {
+    if (limits.heavy_list_factor <= 0) return 0;
+    if (two_pixel_tasks == 0) two_pixel_tasks = cuda::resident_tasks<T>(RasterLayout::two_pixels_per_thread);
+    return two_pixel_tasks;
+}
+
+/// The band's tasks: its extra sub-tasks (bounded), its heavy lists (bounded), then its tiles.
 template <typename T>
 void CudaRenderer<T>::Impl::rasterize(const Frame<T>& f, TileRows rows, std::uint64_t pairs, const PixelOutputs& out) {
     events.record(Event::split, stream);
     const std::uint32_t first_tile = static_cast<std::uint32_t>(rows.begin) * f.view.tiles_x;
     const std::uint32_t band_tiles = static_cast<std::uint32_t>(rows.end - rows.begin) * f.view.tiles_x;
     const std::uint64_t max_extra = max_extra_tasks(f, pairs);
+    const std::uint64_t max_heavy = f.heavy_used ? heavy_room() : 0;
+    const TileBuffers& t = buffers.tiles;
     // Not in exact mode, the ground truth: there every Gaussian meets every pixel's own test.
     const TaskGrid grid{
-        first_tile, band_tiles, f.split_used, f.shared_list, pairs, f.options->culling != Culling::exact, max_extra};
-    const TileBuffers& t = buffers.tiles;
+        first_tile, band_tiles, f.split_used,         f.shared_list,      pairs, f.options->culling != Culling::exact,
+        max_extra,  max_heavy,  t.heavy_tiles.data(), t.runs_first.data()};
     cuda::rasterize(
-        RasterizeArgs<T>{grid, band_tiles + max_extra, raster_layout(), t.range_begin.data(), t.range_end.data(),
-                         t.split_slot.data(), t.labels.data(), task_counters(),
+        RasterizeArgs<T>{grid, band_tiles + max_extra + max_heavy, raster_layout(), t.range_begin.data(),
+                         t.range_end.data(), t.split_slot.data(), t.labels.data(), task_counters(),
                          buffers.pairs.values[buffers.pairs.current].data(), buffers.gaussians.projected.data(), f.view,
                          f.background, f.tail, buffers.pixels.partials.data(), out,
                          f.occlusion ? buffers.occlusion.pyramid.data() : nullptr,

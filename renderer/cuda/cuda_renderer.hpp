@@ -87,6 +87,9 @@ struct CudaLimits {
     bool overlap_copy = true;
     /// kKeysThreadPairs; tests force 0 (every Gaussian by its warp) and the maximum (none).
     std::uint64_t keys_thread_pairs = kKeysThreadPairs;
+    /// kHeavyListFactor: the unsplit lists this many times the mean that rasterize starts
+    /// first; 0 keeps row order (tests compare the two: the order changes no pixel).
+    double heavy_list_factor = kHeavyListFactor;
 };
 
 /// Host copies of the last frame's stage outputs, laid out as CpuRenderer's accessors are (partials
@@ -105,6 +108,8 @@ struct StageReadback {
     /// split: each tile's first partial slot (in the order the device's atomics handed them
     /// out), or kNoPartials when the tile is not split.
     std::vector<std::uint32_t> split_slot;
+    /// split: the lists rasterize starts first (kHeavyListFactor), sorted; empty when none.
+    std::vector<std::uint32_t> heavy_tiles;
     /// rasterize: the (R, A) of the split sub-tasks, kTileSize x kTileSize pixels a slot.
     std::vector<Partial<T>> partials;
 

@@ -126,9 +126,12 @@ struct TileBuffers {
     DeviceArray<std::uint32_t> split_slot;              // split: first partial slot of a split tile, or kNoSlot
     DeviceArray<std::uint32_t> split_tiles;             // split: the tiles merge composites
     DeviceArray<TaskLabel> labels;                      // split: the extra sub-tasks
+    DeviceArray<std::uint32_t> heavy_tiles;             // split: the lists that run first (runs_first)
+    DeviceArray<std::uint8_t> runs_first;               // split: per tile, 1 when listed in heavy_tiles
 
     std::size_t bytes() const {
-        return range_begin.bytes() + range_end.bytes() + split_slot.bytes() + split_tiles.bytes() + labels.bytes();
+        return range_begin.bytes() + range_end.bytes() + split_slot.bytes() + split_tiles.bytes() + labels.bytes() +
+               heavy_tiles.bytes() + runs_first.bytes();
     }
 };
 

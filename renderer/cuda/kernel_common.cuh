@@ -64,6 +64,7 @@ struct TaskCounters {
     unsigned int extra_tasks;           // split: atomic task counter beyond the tiles
     unsigned int split_slots;           // split: partial slots handed out
     unsigned int split_tiles;           // split: tiles that were split
+    unsigned int heavy_tiles;           // split: unsplit lists listed to run first (runs_first)
     unsigned long long longest_list;    // rasterize: the most pairs one tile list holds (frame-wide, last)
     unsigned int occlusion_misses;      // rasterize: tiles that did not stop in front of the occlusion cut
 };

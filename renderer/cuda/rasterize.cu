@@ -122,7 +122,8 @@ struct PixelLayout {
 
 /// The tile and sub-task index of block `block`; false for a block past the tasks that exist.
 /// With split tiles, the extra sub-tasks come first: each is a full k-long slice, the longest
-/// tasks of the frame, and started last they would run alone on an idle GPU at the end.
+/// tasks of the frame, and started last they would run alone on an idle GPU at the end. Then
+/// the heavy lists (kHeavyListFactor), for the same reason, then the other tiles in row order.
 __device__ inline bool task_of_block(const TaskGrid& grid, const TaskLabel* labels, TaskCounters* counters,
                                      std::uint32_t block, std::uint32_t& tile, std::uint32_t& index) {
     index = 0;
@@ -135,9 +136,17 @@ __device__ inline bool task_of_block(const TaskGrid& grid, const TaskLabel* labe
         }
         block -= static_cast<std::uint32_t>(grid.max_extra);
     }
+    if (grid.max_heavy > 0) {
+        if (block < grid.max_heavy) {
+            if (block >= counters->heavy_tiles) return false;
+            tile = grid.heavy_tiles[block];
+            return true;
+        }
+        block -= static_cast<std::uint32_t>(grid.max_heavy);
+    }
     if (block >= grid.band_tiles) return false;
     tile = grid.first_tile + block;
-    return true;
+    return grid.max_heavy == 0 || grid.runs_first[tile] == 0;
 }
 
 /// warp_done's value for a warp whose pixels are not all done.

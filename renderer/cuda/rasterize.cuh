@@ -26,12 +26,16 @@ struct TaskGrid {
     std::uint64_t list_size;
     bool warp_skip;           // warps skip Gaussians whose visible_box misses their block
     std::uint64_t max_extra;  // room for extra sub-tasks (split): blocks [0, max_extra) hold them
+    /// Room for the heavy lists (runs_first), whose blocks come next; 0: the tiles in row order.
+    std::uint64_t max_heavy;
+    const std::uint32_t* heavy_tiles;
+    const std::uint8_t* runs_first;  // a listed tile's own block in row order returns at once
 };
 
 template <typename T>
 struct RasterizeArgs {
     TaskGrid grid;
-    std::uint64_t blocks;  // the band's tiles plus room for its extra sub-tasks
+    std::uint64_t blocks;  // the band's tiles plus room for its extra sub-tasks and heavy lists
     RasterLayout layout;
     const std::uint64_t* range_begin;
     const std::uint64_t* range_end;

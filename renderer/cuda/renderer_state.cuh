@@ -53,6 +53,7 @@ struct Frame {
     std::uint64_t total = 0;  // the frame's pairs
     std::vector<TileRows> bands;
     bool split_used = false;
+    bool heavy_used = false;  // the split stage listed the heavy lists (runs_first)
 
     /// The occlusion cut (stages/occlusion.hpp): applied to this frame's lists (a plain
     /// single-pose frame after a recorded one), and whether rasterize records the tile cuts.
@@ -65,7 +66,7 @@ struct Frame {
 struct LastFrame {
     bool rendered = false;
     std::uint64_t pairs = 0, tiles = 0, max_extra = 0;
-    bool shared_list = false, split_used = false, banded = false;
+    bool shared_list = false, split_used = false, heavy_used = false, banded = false;
     TaskCounters tasks{};
 };
 
@@ -92,6 +93,7 @@ struct CudaRenderer<T>::Impl {
     // The planner plans cached frames only after key_rendered, for lists the device holds.
     std::uint64_t cached_pairs = 0;  // pairs of the cached lists
     bool cached_split = false;       // the cached task list has split tiles
+    bool cached_heavy = false;       // and its heavy lists
     ChunkSpace key_space{};          // the key frame's compacted index space (cached frames reuse it)
     std::uint64_t key_chunks_culled = 0;
     FrameBuffers<T> buffers;
@@ -141,7 +143,8 @@ struct CudaRenderer<T>::Impl {
     void add_cached_list_times();
     // Both.
     void sort(const Frame<T>& f, std::uint64_t pairs);
-    bool ranges_and_split(const Frame<T>& f, std::uint64_t pairs);
+    /// Sets f.split_used and f.heavy_used.
+    void ranges_and_split(Frame<T>& f, std::uint64_t pairs);
     void rasterize(const Frame<T>& f, TileRows rows, std::uint64_t pairs, const PixelOutputs& out);
     void merge(const Frame<T>& f, std::uint64_t pairs, const PixelOutputs& out);
     void add_raster_times();
@@ -156,6 +159,9 @@ struct CudaRenderer<T>::Impl {
     std::uint64_t max_extra_tasks(const Frame<T>& f, std::uint64_t pairs) const {
         return f.split_used ? pairs / f.k_min + 1 : 0;
     }
+    /// Room for the heavy lists: what the GPU holds at once in the wider layout, so that all
+    /// start in rasterize's first wave; 0 when CudaLimits::heavy_list_factor turns them off.
+    std::uint64_t heavy_room();
     /// Depth order: the scan of the counts depth_order ranked; reads the total back only when
     /// `read_total` (cached frames know theirs).
     std::uint64_t scan_ranked_counts(std::uint64_t slots, bool read_total) {

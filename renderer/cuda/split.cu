@@ -14,36 +14,50 @@ __global__ void auto_split_kernel(TaskCounters* counters) {
     counters->split_k = max(kAutoSplitFloor, static_cast<unsigned>(ceil(kAutoSplitFactor * mean)));
 }
 
+// Lists an unsplit tile among the heavy ones when runs_first says so and there is room; the
+// rest of the heavy ones keep their place in row order.
+__device__ void list_if_heavy(const SplitArgs& a, std::uint32_t t, std::uint64_t size) {
+    bool first = runs_first(size, a.counters->rendered_pairs, a.counters->nonempty_tiles, a.heavy_factor);
+    if (first) {
+        const unsigned at = atomicAdd(&a.counters->heavy_tiles, 1u);
+        first = at < a.heavy_room;
+        if (first) a.heavy_tiles[at] = t;
+    }
+    a.runs_first[t] = first ? 1 : 0;
+}
+
 // CaT-GS Algorithm 1: a tile longer than k keeps its remainder-sized first
 // sub-task as task `tile`; its split_num extra sub-tasks are appended through the atomic
 // task counter with (tile, split index) labels. Split tiles get split_num + 1 partial slots
-// and a place in the merge list.
-__global__ void split_kernel(std::uint32_t tiles, const std::uint64_t* range_begin, const std::uint64_t* range_end,
-                             std::uint64_t max_extra, TaskCounters* counters, std::uint32_t* split_slot,
-                             TaskLabel* labels, std::uint32_t* split_tiles) {
+// and a place in the merge list. Unsplit tiles may be listed as heavy (list_if_heavy).
+__global__ void split_kernel(SplitArgs a) {
     const std::uint32_t t = blockIdx.x * blockDim.x + threadIdx.x;
-    if (t >= tiles) return;
-    const std::uint32_t splits = split_count(range_end[t] - range_begin[t], counters->split_k);
+    if (t >= a.tiles) return;
+    TaskCounters* counters = a.counters;
+    const std::uint64_t size = a.range_end[t] - a.range_begin[t];
+    const std::uint32_t splits = a.splitting ? split_count(size, counters->split_k) : 0u;
     if (splits == 0) {
-        split_slot[t] = kNoSlot;
+        if (a.splitting) a.split_slot[t] = kNoSlot;
+        if (a.heavy_room > 0) list_if_heavy(a, t, size);
         return;
     }
+    if (a.heavy_room > 0) a.runs_first[t] = 0;
     const std::uint32_t first_extra = atomicAdd(&counters->extra_tasks, splits);
-    split_slot[t] = atomicAdd(&counters->split_slots, splits + 1);
-    split_tiles[atomicAdd(&counters->split_tiles, 1u)] = t;
+    a.split_slot[t] = atomicAdd(&counters->split_slots, splits + 1);
+    a.split_tiles[atomicAdd(&counters->split_tiles, 1u)] = t;
     for (std::uint32_t i = 1; i <= splits; ++i)
-        if (first_extra + i - 1 < max_extra) labels[first_extra + i - 1] = TaskLabel{t, i};
+        if (first_extra + i - 1 < a.max_extra) a.labels[first_extra + i - 1] = TaskLabel{t, i};
 }
 
 }  // namespace
 
 void split(const SplitArgs& a, cudaStream_t s) {
-    if (a.auto_k) {
+    if (a.splitting && a.auto_k) {
         auto_split_kernel<<<1, 1, 0, s>>>(a.counters);
         CATGS_CUDA_CHECK_LAUNCH("auto_split_kernel");
     }
-    split_kernel<<<blocks_for(a.tiles, kThreads), kThreads, 0, s>>>(a.tiles, a.range_begin, a.range_end, a.max_extra,
-                                                                    a.counters, a.split_slot, a.labels, a.split_tiles);
+    if (!a.splitting && a.heavy_room == 0) return;
+    split_kernel<<<blocks_for(a.tiles, kThreads), kThreads, 0, s>>>(a);
     CATGS_CUDA_CHECK_LAUNCH("split_kernel");
 }
 

@@ -71,6 +71,8 @@ StageReadback<T> CudaRenderer<T>::read_back_stages() {
     const std::uint64_t labels = std::min<std::uint64_t>(last.tasks.extra_tasks, last.max_extra);  // as rasterize reads
     const std::vector<TaskLabel> extra = copy_to_host(t.labels.data(), labels, s);
     std::vector<std::uint32_t> slot = copy_to_host(t.split_slot.data(), last.split_used ? last.tiles : 0, s);
+    const std::uint64_t heavy = last.heavy_used ? std::min<std::uint64_t>(last.tasks.heavy_tiles, m.heavy_room()) : 0;
+    r.heavy_tiles = copy_to_host(t.heavy_tiles.data(), heavy, s);
     const std::size_t partial_count = last.split_used
                                           ? std::min<std::size_t>(std::size_t{last.tasks.split_slots} * kTilePixels,
                                                                   m.buffers.pixels.partials.capacity())
@@ -90,6 +92,7 @@ StageReadback<T> CudaRenderer<T>::read_back_stages() {
     std::sort(
         r.tasks.begin() + static_cast<std::ptrdiff_t>(last.tiles), r.tasks.end(),
         [](const TileTask& a, const TileTask& b) { return a.tile != b.tile ? a.tile < b.tile : a.index < b.index; });
+    std::sort(r.heavy_tiles.begin(), r.heavy_tiles.end());
     if (!last.split_used) return r;
     r.split_k = last.tasks.split_k;
     r.split_slot = std::move(slot);

@@ -39,6 +39,21 @@ CATGS_INLINE void subtask_range(std::uint64_t list_begin, std::uint64_t list_end
     }
 }
 
+/// The GPU's task order (not an image rule: any order draws the same pixels): an unsplit list
+/// at least this many times the mean non-empty list runs right after the extra sub-tasks,
+/// before the tiles in row order. Started in row order, such a list can start among the
+/// frame's last tasks and finish alone, holding its band of rows back from the copy to the
+/// host (a garden low 4K trace, session 32: the copy's exposed tail waited on such lists). 4 is
+/// also where automatic k cuts a list (kAutoSplitFactor), so with splitting on it lists what
+/// the floor of k left whole.
+inline constexpr double kHeavyListFactor = 4.0;
+
+/// Whether a list of `size` pairs runs first, in a frame of `pairs` pairs over `nonempty`
+/// non-empty lists (kHeavyListFactor; 0 lists nothing).
+CATGS_INLINE bool runs_first(std::uint64_t size, std::uint64_t pairs, std::uint32_t nonempty, double factor) {
+    return factor > 0 && size > 0 && static_cast<double>(size) * nonempty >= factor * static_cast<double>(pairs);
+}
+
 /// One sub-task's result at a pixel: colour R (premultiplied, background excluded) and
 /// transmittance A.
 template <typename T>
