@@ -6,6 +6,7 @@
 #include <thread>
 
 #include "../test_util.hpp"
+#include "same_renders.hpp"
 #include "catgs/builtin_city.hpp"
 #include "catgs/cpu_renderer.hpp"
 #include "catgs/error.hpp"
@@ -267,20 +268,12 @@ TEST_F(CudaRendererTest, CopyOutOverlapsTheDrawingWithoutChangingTheImage) {
         EXPECT_FALSE(b.copies_while_drawing());
         const bool glide = c.options.catgs.cache != CacheMode::off;
         int banded = 0, split_frames = 0, cached_frames = 0;
-        for (int frame = 0; frame < 6; ++frame) {
-            const Camera cam = view(glide, frame);
-            ImageRGB8 a8, b8;
-            ImageF af, bf;
-            const FrameStats sa = a.render(cam, c.options, &a8, &af);
-            const FrameStats sb = b.render(cam, c.options, &b8, &bf);
-            const std::string what = c.name + ", frame " + std::to_string(frame);
-            ASSERT_EQ(a8.rgb, b8.rgb) << what;
-            ASSERT_EQ(af.rgb, bf.rgb) << what;
-            EXPECT_EQ(sa.pairs, sb.pairs) << what;
+        for (const auto& [sa, sb] : test::expect_same_renders(
+                 a, b, c.options, [&](int frame) { return view(glide, frame); }, 6, view(false, 1), c.name)) {
             banded += sa.bands > 1;
             split_frames += sa.split_tasks > 0;
             cached_frames += !sa.key_frame;
-            EXPECT_GT(sa.stage_ms[Stage::copy_out], 0.0) << what;
+            EXPECT_GT(sa.stage_ms[Stage::copy_out], 0.0) << c.name;
         }
         if (c.max_pairs) {
             EXPECT_EQ(banded, 6) << c.name;
@@ -294,12 +287,6 @@ TEST_F(CudaRendererTest, CopyOutOverlapsTheDrawingWithoutChangingTheImage) {
         // Where the driver takes stream memory waits, every frame copied while drawing (a wait
         // it refused mid-frame would have turned the renderer to the fallback for good).
         EXPECT_EQ(a.copies_while_drawing(), cuda::stream_memory_waits_available()) << c.name;
-        PartialImage pa, pb;
-        a.render_partial(view(false, 1), c.options, pa);
-        b.render_partial(view(false, 1), c.options, pb);
-        EXPECT_EQ(pa.colour, pb.colour) << c.name << ", partial";
-        EXPECT_EQ(pa.transmittance, pb.transmittance) << c.name << ", partial";
-        EXPECT_EQ(pa.stopped, pb.stopped) << c.name << ", partial";
     }
 }
 
