@@ -194,7 +194,6 @@ FrameStats CudaRenderer<T>::Impl::draw(Frame<T>& f, const HostOutputs& out) {
             ranges_and_split(f, f.total);
             cached_split = f.split_used;
             cached_heavy = f.heavy_used;
-            cached_heavy = f.heavy_used;
         } else {
             // The key frame's lists and order as they are; the marks keep the stage times at 0.
             for (Event e : {Event::depth_order, Event::scan, Event::keys, Event::sort, Event::ranges, Event::split})
