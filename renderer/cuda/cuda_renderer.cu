@@ -75,6 +75,7 @@ CudaRenderer<T>::CudaRenderer(cudaStream_t stream, CudaLimits limits) : impl_(st
         impl_->own_stream = true;
     }
     impl_->host.total.reserve(1);
+    impl_->host.lists.reserve(1);
     impl_->host.selected.reserve(1);
     impl_->host.counters.reserve(1);
     impl_->host.views.reserve(kMaxWindow);
@@ -206,22 +207,26 @@ FrameStats CudaRenderer<T>::Impl::draw(Frame<T>& f, const HostOutputs& out) {
     for (const TileRows& rows : f.bands) {
         const bool last_band = &rows == &f.bands.back();
         std::uint64_t pairs = f.total;
+        const Event pass_start = f.bands.size() > 1 ? Event::band_scan : Event::scan;
         if (f.plan.key) {
-            const Event pass_start = f.bands.size() > 1 ? Event::band_scan : Event::scan;
             if (f.bands.size() > 1) pairs = count_band(f, rows);
             keys(f, rows, pairs);
             sort(f, pairs);
             ranges_and_split(f, pairs);
-            add_list_times(pass_start);
         }
         rasterize(f, rows, pairs, device);
         merge(f, pairs, device);
         // Enqueued before the host waits on this band, so that its copies overlap what follows.
         copy_drawn_rows(f, rows.end, out);
         if (last_band) end_copies();
+        // Once the band is drawn; the next band marks its list stages again.
         add_raster_times();
+        if (f.plan.key) add_list_times(pass_start);
     }
-    if (!f.plan.key) add_cached_list_times();
+    if (f.plan.key)
+        add_key_times();
+    else
+        add_cached_list_times();
     copy_out(f, out);
     return frame_stats(f);
 }
@@ -348,12 +353,17 @@ void CudaRenderer<T>::Impl::preprocess(Frame<T>& f) {
 
 /// The Gaussians in depth order (sort's first part) and the scan of their counts in that
 /// order; a frame over the pair budget is planned in bands instead, each emitted in that order.
+/// Its times are read once the frame is drawn (add_key_times): the host does not wait here.
 template <typename T>
 void CudaRenderer<T>::Impl::scan(Frame<T>& f) {
     f.total = order_by_depth(buffers.gaussians.sort_depth.data(), true);
     const std::uint64_t budget = pair_budget();
     if (f.total > budget) plan_bands(f, budget);
-    events.synchronize(Event::scan);
+}
+
+/// A key frame's stages before its bands, once the last band is drawn.
+template <typename T>
+void CudaRenderer<T>::Impl::add_key_times() {
     events.add(Stage::chunk_cull, Event::start, Event::chunk_cull);
     events.add(Stage::preprocess, Event::chunk_cull, Event::preprocess);
     events.add(Stage::sort, Event::preprocess, Event::depth_order);
@@ -393,7 +403,9 @@ void CudaRenderer<T>::Impl::keys(const Frame<T>& f, TileRows rows, std::uint64_t
     events.record(Event::keys, s);
 }
 
-/// A key frame's band, from its scan (pass_start) to its split.
+/// A key frame's band, from its scan (pass_start) to its split, once the band is drawn (no
+/// wait between split and rasterize: a wait there left the GPU idle for a round trip through
+/// the host, outside every stage's time).
 template <typename T>
 void CudaRenderer<T>::Impl::add_list_times(Event pass_start) {
     events.synchronize(Event::split);
@@ -432,7 +444,7 @@ void CudaRenderer<T>::Impl::rekey(const Frame<T>& f) {
 }
 
 /// Cached frame: its events are read once the last band is drawn, so that nothing waits on
-/// the host before rasterize (split is not timed: rasterize re-marks it).
+/// the host before rasterize.
 template <typename T>
 void CudaRenderer<T>::Impl::add_cached_list_times() {
     events.add(Stage::preprocess, Event::start, Event::preprocess);
@@ -441,6 +453,7 @@ void CudaRenderer<T>::Impl::add_cached_list_times() {
     events.add(Stage::keys, Event::scan, Event::keys);
     events.add(Stage::sort, Event::keys, Event::sort);
     events.add(Stage::ranges, Event::sort, Event::ranges);
+    events.add(Stage::split, Event::ranges, Event::split);
 }
 
 template <typename T>
@@ -510,7 +523,6 @@ std::uint64_t CudaRenderer<T>::Impl::heavy_room() {
 /// The band's tasks: its extra sub-tasks (bounded), its heavy lists (bounded), then its tiles.
 template <typename T>
 void CudaRenderer<T>::Impl::rasterize(const Frame<T>& f, TileRows rows, std::uint64_t pairs, const PixelOutputs& out) {
-    events.record(Event::split, stream);
     const std::uint32_t first_tile = static_cast<std::uint32_t>(rows.begin) * f.view.tiles_x;
     const std::uint32_t band_tiles = static_cast<std::uint32_t>(rows.end - rows.begin) * f.view.tiles_x;
     const std::uint64_t max_extra = max_extra_tasks(f, pairs);

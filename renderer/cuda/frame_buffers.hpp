@@ -66,10 +66,9 @@ struct GaussianBuffers {
 /// (a key frame's, which its cached frames keep), then the slots front to back,
 /// double-buffered for the sort, and their pair counts and scanned offsets in that order.
 struct DepthOrderBuffers {
-    DeviceArray<std::uint32_t> with_pairs;      // the slots with pairs, ascending
-    DeviceArray<std::uint64_t> selected_count;  // how many (1 entry)
+    DeviceArray<std::uint32_t> with_pairs;  // the slots with pairs, ascending
     DeviceArray<std::uint8_t> select_temp;
-    std::uint64_t ranked = 0;                   // the selected count, read back
+    std::uint64_t ranked = 0;                   // the selected count, read back (ListTotals)
     DeviceArray<std::uint32_t> keys[2];         // depth bits
     DeviceArray<std::uint32_t> slots[2];        // slot indices
     int current = 0;                            // which of keys/slots holds the order
@@ -78,8 +77,8 @@ struct DepthOrderBuffers {
 
     const std::uint32_t* order() const { return slots[current].data(); }
     std::size_t bytes() const {
-        return with_pairs.bytes() + selected_count.bytes() + select_temp.bytes() + keys[0].bytes() + keys[1].bytes() +
-               slots[0].bytes() + slots[1].bytes() + ranked_offsets.bytes() + sort_temp.bytes();
+        return with_pairs.bytes() + select_temp.bytes() + keys[0].bytes() + keys[1].bytes() + slots[0].bytes() +
+               slots[1].bytes() + ranked_offsets.bytes() + sort_temp.bytes();
     }
 };
 
@@ -197,7 +196,8 @@ private:
 template <typename T>
 struct HostStaging {
     PinnedArray<View<T>> views;
-    PinnedArray<std::uint64_t> total;     // one read-back per scan
+    PinnedArray<std::uint64_t> total;     // a band's scan total
+    PinnedArray<ListTotals> lists;        // a key frame's totals, read back before its depth sort
     PinnedArray<std::uint32_t> selected;  // the visible chunk count of a key frame
     PinnedArray<Counters> counters;
     PinnedArray<std::uint8_t> rgb8;  // copy_out

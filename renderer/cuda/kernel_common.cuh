@@ -46,10 +46,20 @@ struct DeviceSceneView {
     std::uint64_t count;
 };
 
+/// A key frame's list totals, side by side so that one read-back brings both to the host
+/// before the depth sort: the host needs the selected count to size the sort, and the pair
+/// total to size keys and sort and to plan bands. A second read-back after the scan stalled
+/// the GPU for a round trip through the host every key frame.
+struct ListTotals {
+    unsigned long long pairs;       // preprocess: every slot's tiles summed (the scan's total)
+    unsigned long long with_pairs;  // depth_order's select: the slots with pairs
+};
+
 /// Device-side counters, one allocation, read back once per frame. The frame part is reset
 /// every frame; the task part belongs to the task list, which cached frames reuse from their
 /// key frame, so only a key frame's split pass resets it.
 struct FrameCounters {
+    ListTotals lists;
     unsigned long long visible;         // Gaussians with tiles at the actual pose
     unsigned int min_depth_bits;        // float bits of the nearest depth (positive floats order as ints)
     unsigned int max_extent_bits;       // float bits of the largest non-full-grid half-extent

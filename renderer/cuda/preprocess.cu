@@ -68,6 +68,7 @@ __global__ void __launch_bounds__(Threads, MinBlocks)
     const std::uint64_t slot = static_cast<std::uint64_t>(blockIdx.x) * blockDim.x + threadIdx.x;
     bool visible = false;
     std::uint32_t occluded_pairs = 0;
+    unsigned long long pairs = 0;  // this slot's, into the frame's total
     float nearest = INFINITY, extent = 0.0f;
     double inverse_depth = 0.0;
     std::uint64_t i = 0;
@@ -87,6 +88,7 @@ __global__ void __launch_bounds__(Threads, MinBlocks)
             tiles = 0;
         }
         touched[slot] = tiles;
+        pairs = tiles;
         if (Summarize && tiles == 0 && guard > T(0) && culling != Culling::exact && (valid & 1u)) {
             // In no list, but able to enter the image within the envelope (envelope.hpp).
             const float* sc = gaussian_ref(scene, i).scale;
@@ -130,6 +132,13 @@ __global__ void __launch_bounds__(Threads, MinBlocks)
     const int block_visible = __syncthreads_count(visible);
     if (threadIdx.x == 0 && block_visible > 0)
         atomicAdd(&counters->visible, static_cast<unsigned long long>(block_visible));
+    {
+        // 64-bit: a window's footprint union on a large grid can pass 2^32 pairs over a block.
+        using PairReduce = cub::BlockReduce<unsigned long long, Threads>;
+        __shared__ typename PairReduce::TempStorage pair_temp;
+        const unsigned long long block_total = PairReduce(pair_temp).Sum(pairs);
+        if (threadIdx.x == 0 && block_total > 0) atomicAdd(&counters->lists.pairs, block_total);
+    }
     if (MaxWindow == 1 && occlusion.active()) {  // uniform across the launch
         using CountReduce = cub::BlockReduce<std::uint32_t, Threads>;
         __shared__ typename CountReduce::TempStorage count_temp;

@@ -137,6 +137,7 @@ struct CudaRenderer<T>::Impl {
     std::uint64_t count_band(const Frame<T>& f, TileRows rows);
     void keys(const Frame<T>& f, TileRows rows, std::uint64_t pairs);
     void add_list_times(Event pass_start);
+    void add_key_times();
     // A cached frame's lists.
     void reproject(Frame<T>& f);
     void rekey(const Frame<T>& f);
@@ -171,17 +172,20 @@ struct CudaRenderer<T>::Impl {
                           stream);
     }
     /// The slots with pairs in depth order by `depth` (sort.cuh), then their offsets. A key
-    /// frame selects the slots with pairs (one read-back); a cached frame re-sorts that same
-    /// selection (`read_total` false: nothing is read back).
-    std::uint64_t order_by_depth(const float* depth, bool read_total) {
+    /// frame selects the slots with pairs and reads back their count with the pair total that
+    /// preprocess summed (one read-back, before the sort: the scan then runs on unread); a
+    /// cached frame re-sorts that same selection (`select` false: nothing is read back, and
+    /// the total it returns is 0: the frame knows its own).
+    std::uint64_t order_by_depth(const float* depth, bool select) {
+        ListTotals* totals = &frame_counters()->lists;
         const std::uint64_t ranked =
             cuda::depth_order(DepthOrderArgs{key_space.slots, buffers.gaussians.touched.data(), depth, &buffers.depth,
-                                             !read_total, host.total.data()},
+                                             !select, select ? totals : nullptr, select ? host.lists.data() : nullptr},
                               stream);
         events.record(Event::depth_order, stream);
-        const std::uint64_t total = scan_ranked_counts(ranked, read_total);
+        scan_ranked_counts(ranked, false);
         events.record(Event::scan, stream);
-        return total;
+        return select ? host.lists.data()->pairs : 0;
     }
     DeviceSceneView scene_view() const {
         const DeviceScene& s = *scene;

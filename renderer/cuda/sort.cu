@@ -28,24 +28,23 @@ __global__ void depth_keys_kernel(std::uint64_t n, const std::uint32_t* with_pai
     slots[k] = slot;
 }
 
-/// The slots with pairs, in slot order (a stable CUB select), and how many there are (one
-/// read-back: synchronises the stream).
+/// The slots with pairs, in slot order (a stable CUB select), and how many there are, read
+/// back with the pair total beside it (one read-back: synchronises the stream).
 void select_slots_with_pairs(const DepthOrderArgs& a, cudaStream_t s) {
+    if (!a.totals || !a.host_totals) throw Error("cuda renderer: depth order selects slots without its list totals");
     DepthOrderBuffers& o = *a.order;
     o.with_pairs.reserve(a.slots, s);
-    o.selected_count.reserve(1, s);
     const thrust::counting_iterator<std::uint32_t> slots(0);
+    unsigned long long* count = &a.totals->with_pairs;
     std::size_t temp_bytes = 0;
-    CATGS_CUDA_CHECK(cub::DeviceSelect::If(nullptr, temp_bytes, slots, o.with_pairs.data(), o.selected_count.data(),
+    CATGS_CUDA_CHECK(cub::DeviceSelect::If(nullptr, temp_bytes, slots, o.with_pairs.data(), count,
                                            static_cast<std::int64_t>(a.slots), HasPairs{a.touched}, s));
     o.select_temp.reserve(temp_bytes, s);
-    CATGS_CUDA_CHECK(cub::DeviceSelect::If(o.select_temp.data(), temp_bytes, slots, o.with_pairs.data(),
-                                           o.selected_count.data(), static_cast<std::int64_t>(a.slots),
-                                           HasPairs{a.touched}, s));
-    CATGS_CUDA_CHECK(
-        cudaMemcpyAsync(a.host_count, o.selected_count.data(), sizeof(std::uint64_t), cudaMemcpyDeviceToHost, s));
+    CATGS_CUDA_CHECK(cub::DeviceSelect::If(o.select_temp.data(), temp_bytes, slots, o.with_pairs.data(), count,
+                                           static_cast<std::int64_t>(a.slots), HasPairs{a.touched}, s));
+    CATGS_CUDA_CHECK(cudaMemcpyAsync(a.host_totals, a.totals, sizeof(ListTotals), cudaMemcpyDeviceToHost, s));
     CATGS_CUDA_CHECK(cudaStreamSynchronize(s));
-    o.ranked = *a.host_count;
+    o.ranked = a.host_totals->with_pairs;
 }
 
 }  // namespace

@@ -33,11 +33,14 @@ struct DepthOrderArgs {
     /// Keep the previous call's slots with pairs (a cached frame re-sorts its key frame's
     /// lists: same counts), so that nothing is read back.
     bool reuse_selection = false;
-    std::uint64_t* host_count = nullptr;  // pinned: the read-back of the selected count
+    /// Device: the frame's totals, where the select writes its count beside preprocess's pair
+    /// total; pinned host: both read back at once. Needed unless reuse_selection.
+    ListTotals* totals = nullptr;
+    ListTotals* host_totals = nullptr;
 };
 
 /// The slots with pairs, front to back (a stable CUB select of them in slot order, whose count
-/// is read back, then a stable CUB radix sort of their depth bits, so equal depths keep slot
+/// is read back with the pair total, then a stable CUB radix sort of their depth bits, so equal depths keep slot
 /// order), ready for the scan of their pair counts in that order. Slots without pairs are
 /// most of a frame's on large scenes, and a sort over them all was 4 passes over every slot.
 /// Returns how many slots the order holds (order.ranked).

@@ -13,8 +13,9 @@
 
 namespace catgs::cuda {
 
-/// The marks of one frame on the stream. A banded frame marks band_count..merge once per band;
-/// `split` is marked again before each band's rasterize, so that rasterize starts there.
+/// The marks of one frame on the stream. A banded frame marks band_count..merge once per band,
+/// and each band's are read once it is drawn; rasterize runs from `split`, with no host wait
+/// between them.
 enum class Event : int {
     start,
     chunk_cull,
