@@ -20,28 +20,23 @@ __global__ void chunk_cull_kernel(const Chunk* chunks, std::uint32_t count, cons
 }  // namespace
 
 template <typename T>
-std::uint32_t chunk_cull(const ChunkCullArgs<T>& a, cudaStream_t s) {
+void chunk_cull(const ChunkCullArgs<T>& a, cudaStream_t s) {
     ChunkBuffers& b = *a.buffers;
     b.flags.reserve(a.count, s);
     b.selected.reserve(a.count, s);
-    b.selected_count.reserve(1, s);
     chunk_cull_kernel<T><<<blocks_for(a.count, kThreads), kThreads, 0, s>>>(
         a.chunks, a.count, a.views, a.window, a.guard, a.guard_translation, b.flags.data());
     CATGS_CUDA_CHECK_LAUNCH("chunk_cull_kernel");
     std::size_t temp_bytes = 0;
     CATGS_CUDA_CHECK(cub::DeviceSelect::Flagged(nullptr, temp_bytes, a.all_chunks, b.flags.data(), b.selected.data(),
-                                                b.selected_count.data(), static_cast<std::int64_t>(a.count), s));
+                                                a.live_chunks, static_cast<std::int64_t>(a.count), s));
     b.select_temp.reserve(temp_bytes, s);
     CATGS_CUDA_CHECK(cub::DeviceSelect::Flagged(b.select_temp.data(), temp_bytes, a.all_chunks, b.flags.data(),
-                                                b.selected.data(), b.selected_count.data(),
-                                                static_cast<std::int64_t>(a.count), s));
-    CATGS_CUDA_CHECK(
-        cudaMemcpyAsync(a.host_selected, b.selected_count.data(), sizeof(std::uint32_t), cudaMemcpyDeviceToHost, s));
-    CATGS_CUDA_CHECK(cudaStreamSynchronize(s));
-    return *a.host_selected;
+                                                b.selected.data(), a.live_chunks, static_cast<std::int64_t>(a.count),
+                                                s));
 }
 
-template std::uint32_t chunk_cull(const ChunkCullArgs<float>&, cudaStream_t);
-template std::uint32_t chunk_cull(const ChunkCullArgs<double>&, cudaStream_t);
+template void chunk_cull(const ChunkCullArgs<float>&, cudaStream_t);
+template void chunk_cull(const ChunkCullArgs<double>&, cudaStream_t);
 
 }  // namespace catgs::cuda

@@ -20,14 +20,15 @@ struct ChunkCullArgs {
     std::uint32_t count;
     const View<T>* views;  // the window's poses
     int window;
-    T guard, guard_translation;    // the envelope (cache.hpp); 0 without speculation
-    ChunkBuffers* buffers;         // flags, the selected chunks and their count
-    std::uint32_t* host_selected;  // pinned: the count on its way to the host
+    T guard, guard_translation;       // the envelope (cache.hpp); 0 without speculation
+    ChunkBuffers* buffers;            // flags and the selected chunks
+    unsigned long long* live_chunks;  // device: their count (ListTotals, read back with the totals)
 };
 
-/// Flags and compacts the visible chunks into buffers->selected; returns how many there are.
-/// Synchronises the stream (the count sizes the rest of the frame).
+/// Flags and compacts the visible chunks into buffers->selected, their count into
+/// *live_chunks. Does not wait for it: the host reads it back with the depth order's totals
+/// (sort.cuh), and until then ChunkSpace::live_chunks bounds the slots on the device.
 template <typename T>
-std::uint32_t chunk_cull(const ChunkCullArgs<T>& args, cudaStream_t stream);
+void chunk_cull(const ChunkCullArgs<T>& args, cudaStream_t stream);
 
 }  // namespace catgs::cuda

@@ -76,7 +76,6 @@ CudaRenderer<T>::CudaRenderer(cudaStream_t stream, CudaLimits limits) : impl_(st
     }
     impl_->host.total.reserve(1);
     impl_->host.lists.reserve(1);
-    impl_->host.selected.reserve(1);
     impl_->host.counters.reserve(1);
     impl_->host.views.reserve(kMaxWindow);
     impl_->buffers.window.counters.reserve(1, impl_->stream);
@@ -309,7 +308,8 @@ void CudaRenderer<T>::Impl::begin_frame(const Frame<T>& f, const HostOutputs& ou
 
 /// The window's poses up to the device (projected with the near plane lowered by the
 /// translation guard, footprints dilated by the pixel guard: cache.hpp), then the chunks some
-/// pose may see; exact culling keeps them all.
+/// pose may see; exact culling keeps them all. Their count stays on the device until the
+/// depth order's read-back (scan): preprocess and the select are bounded by it there.
 template <typename T>
 void CudaRenderer<T>::Impl::chunk_cull(Frame<T>& f) {
     const DeviceScene& sc = *scene;
@@ -319,17 +319,16 @@ void CudaRenderer<T>::Impl::chunk_cull(Frame<T>& f) {
     CATGS_CUDA_CHECK(cudaMemcpyAsync(buffers.window.views.data(), host.views.data(), w * sizeof(View<T>),
                                      cudaMemcpyHostToDevice, stream));
     const std::uint32_t chunk_count = sc.chunk_count();
-    std::uint32_t live_chunks = chunk_count;
-    const std::uint32_t* selected = sc.all_chunks();
+    key_space = ChunkSpace{sc.chunks(), sc.all_chunks(), static_cast<std::uint64_t>(chunk_count) * kChunkGaussians};
+    key_chunks_culled = 0;
     if (options.chunk_culling && options.culling != Culling::exact && sc.partitioned() && chunk_count > 0) {
-        live_chunks =
-            cuda::chunk_cull(ChunkCullArgs<T>{sc.chunks(), sc.all_chunks(), chunk_count, buffers.window.views.data(), w,
-                                              f.guard, f.guard_translation, &buffers.chunks, host.selected.data()},
-                             stream);
-        selected = buffers.chunks.selected.data();
+        unsigned long long* live = &frame_counters()->lists.live_chunks;
+        cuda::chunk_cull(ChunkCullArgs<T>{sc.chunks(), sc.all_chunks(), chunk_count, buffers.window.views.data(), w,
+                                          f.guard, f.guard_translation, &buffers.chunks, live},
+                         stream);
+        key_space.selected = buffers.chunks.selected.data();
+        key_space.live_chunks = live;
     }
-    key_space = ChunkSpace{sc.chunks(), selected, static_cast<std::uint64_t>(live_chunks) * kChunkGaussians};
-    key_chunks_culled = sc.partitioned() ? chunk_count - live_chunks : 0;
     events.record(Event::chunk_cull, stream);
 }
 
@@ -357,6 +356,13 @@ void CudaRenderer<T>::Impl::preprocess(Frame<T>& f) {
 template <typename T>
 void CudaRenderer<T>::Impl::scan(Frame<T>& f) {
     f.total = order_by_depth(buffers.gaussians.sort_depth.data(), true);
+    if (key_space.live_chunks) {
+        // The later stages, and the cached frames, walk the kept chunks' slots only.
+        const std::uint64_t live = host.lists.data()->live_chunks;
+        key_space.slots = live * kChunkGaussians;
+        key_space.live_chunks = nullptr;
+        key_chunks_culled = scene->chunk_count() - static_cast<std::uint32_t>(live);
+    }
     const std::uint64_t budget = pair_budget();
     if (f.total > budget) plan_bands(f, budget);
 }

@@ -33,14 +33,11 @@ struct WindowBuffers {
 
 /// Per chunk of the scene: chunk culling's flags and the compacted list of visible chunks.
 struct ChunkBuffers {
-    DeviceArray<std::uint8_t> flags;      // 1 = some pose may see the chunk
-    DeviceArray<std::uint32_t> selected;  // the visible chunks, in scene order
-    DeviceArray<std::uint32_t> selected_count;
+    DeviceArray<std::uint8_t> flags;        // 1 = some pose may see the chunk
+    DeviceArray<std::uint32_t> selected;    // the visible chunks, in scene order
     DeviceArray<std::uint8_t> select_temp;  // CUB's DeviceSelect
 
-    std::size_t bytes() const {
-        return flags.bytes() + selected.bytes() + selected_count.bytes() + select_temp.bytes();
-    }
+    std::size_t bytes() const { return flags.bytes() + selected.bytes() + select_temp.bytes(); }
 };
 
 /// Per Gaussian: the projection by Gaussian index, and the counts, depths and offsets by slot
@@ -196,9 +193,8 @@ private:
 template <typename T>
 struct HostStaging {
     PinnedArray<View<T>> views;
-    PinnedArray<std::uint64_t> total;     // a band's scan total
-    PinnedArray<ListTotals> lists;        // a key frame's totals, read back before its depth sort
-    PinnedArray<std::uint32_t> selected;  // the visible chunk count of a key frame
+    PinnedArray<std::uint64_t> total;  // a band's scan total
+    PinnedArray<ListTotals> lists;     // a key frame's totals, read back before its depth sort
     PinnedArray<Counters> counters;
     PinnedArray<std::uint8_t> rgb8;  // copy_out
     PinnedArray<float> rgb_float;

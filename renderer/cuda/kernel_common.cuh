@@ -46,13 +46,15 @@ struct DeviceSceneView {
     std::uint64_t count;
 };
 
-/// A key frame's list totals, side by side so that one read-back brings both to the host
-/// before the depth sort: the host needs the selected count to size the sort, and the pair
-/// total to size keys and sort and to plan bands. A second read-back after the scan stalled
-/// the GPU for a round trip through the host every key frame.
+/// A key frame's list totals, side by side so that one read-back brings them all to the host
+/// before the depth sort: the host needs the selected count to size the sort, the pair total
+/// to size keys and sort and to plan bands, and the chunks kept for the later stages' index
+/// space. A read-back after chunk culling and another after the scan each stalled the GPU for
+/// a round trip through the host every key frame.
 struct ListTotals {
-    unsigned long long pairs;       // preprocess: every slot's tiles summed (the scan's total)
-    unsigned long long with_pairs;  // depth_order's select: the slots with pairs
+    unsigned long long pairs;        // preprocess: every slot's tiles summed (the scan's total)
+    unsigned long long with_pairs;   // depth_order's select: the slots with pairs
+    unsigned long long live_chunks;  // chunk_cull: the chunks some pose may see (when it ran)
 };
 
 /// Device-side counters, one allocation, read back once per frame. The frame part is reset
@@ -97,6 +99,13 @@ struct ChunkSpace {
     const Chunk* chunks;
     const std::uint32_t* selected;
     std::uint64_t slots;
+    /// Before the host reads back how many chunks chunk_cull kept (a key frame's preprocess and
+    /// select): their count on the device, with `slots` covering every chunk. Null after.
+    const unsigned long long* live_chunks = nullptr;
+
+    __device__ std::uint64_t live_slots() const {
+        return live_chunks ? static_cast<std::uint64_t>(*live_chunks) * kChunkGaussians : slots;
+    }
 
     /// The Gaussian of slot p, or false for an empty slot.
     __device__ bool gaussian(std::uint64_t p, std::uint64_t& i) const {

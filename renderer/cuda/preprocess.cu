@@ -66,14 +66,19 @@ __global__ void __launch_bounds__(Threads, MinBlocks)
                       bool reproject_actual, Culling culling, T guard, T guard_translation, Projected<T>* projected,
                       std::uint64_t* touched, float* sort_depth, FrameCounters* counters, OcclusionCut occlusion) {
     const std::uint64_t slot = static_cast<std::uint64_t>(blockIdx.x) * blockDim.x + threadIdx.x;
+    // The grid covers every chunk; chunk_cull kept the first live_slots (ChunkSpace). The end
+    // mark of the scan's counts goes after them (the host writes it at space.slots).
+    const std::uint64_t live = space.live_slots();
+    if (slot == live && live < space.slots) touched[slot] = 0;
+    if (static_cast<std::uint64_t>(blockIdx.x) * blockDim.x >= live) return;  // the whole block: no barrier left
     bool visible = false;
     std::uint32_t occluded_pairs = 0;
     unsigned long long pairs = 0;  // this slot's, into the frame's total
     float nearest = INFINITY, extent = 0.0f;
     double inverse_depth = 0.0;
     std::uint64_t i = 0;
-    const bool present = slot < space.slots && space.gaussian(slot, i);
-    if (slot < space.slots && !present) touched[slot] = 0;
+    const bool present = slot < live && space.gaussian(slot, i);
+    if (slot < live && !present) touched[slot] = 0;
     if (present) {
         Projected<T> poses[MaxWindow];
         const std::uint32_t valid = project_window<T, MaxWindow>(scene, i, views, window, poses);

@@ -179,7 +179,7 @@ struct CudaRenderer<T>::Impl {
     std::uint64_t order_by_depth(const float* depth, bool select) {
         ListTotals* totals = &frame_counters()->lists;
         const std::uint64_t ranked =
-            cuda::depth_order(DepthOrderArgs{key_space.slots, buffers.gaussians.touched.data(), depth, &buffers.depth,
+            cuda::depth_order(DepthOrderArgs{key_space, buffers.gaussians.touched.data(), depth, &buffers.depth,
                                              !select, select ? totals : nullptr, select ? host.lists.data() : nullptr},
                               stream);
         events.record(Event::depth_order, stream);

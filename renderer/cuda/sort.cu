@@ -15,7 +15,12 @@ namespace {
 
 struct HasPairs {
     const std::uint64_t* touched;
-    __device__ bool operator()(std::uint32_t slot) const { return touched[slot] > 0; }
+    // ChunkSpace::live_chunks: slots past the live chunks' were not preprocessed this frame.
+    // Only the pointer, not the whole ChunkSpace: with it CUB's select kernel spilled.
+    const unsigned long long* live_chunks;
+    __device__ bool operator()(std::uint32_t slot) const {
+        return (!live_chunks || slot < *live_chunks * kChunkGaussians) && touched[slot] > 0;
+    }
 };
 
 __global__ void depth_keys_kernel(std::uint64_t n, const std::uint32_t* with_pairs, const float* depth,
@@ -33,15 +38,17 @@ __global__ void depth_keys_kernel(std::uint64_t n, const std::uint32_t* with_pai
 void select_slots_with_pairs(const DepthOrderArgs& a, cudaStream_t s) {
     if (!a.totals || !a.host_totals) throw Error("cuda renderer: depth order selects slots without its list totals");
     DepthOrderBuffers& o = *a.order;
-    o.with_pairs.reserve(a.slots, s);
+    o.with_pairs.reserve(a.space.slots, s);
     const thrust::counting_iterator<std::uint32_t> slots(0);
     unsigned long long* count = &a.totals->with_pairs;
     std::size_t temp_bytes = 0;
     CATGS_CUDA_CHECK(cub::DeviceSelect::If(nullptr, temp_bytes, slots, o.with_pairs.data(), count,
-                                           static_cast<std::int64_t>(a.slots), HasPairs{a.touched}, s));
+                                           static_cast<std::int64_t>(a.space.slots),
+                                           HasPairs{a.touched, a.space.live_chunks}, s));
     o.select_temp.reserve(temp_bytes, s);
     CATGS_CUDA_CHECK(cub::DeviceSelect::If(o.select_temp.data(), temp_bytes, slots, o.with_pairs.data(), count,
-                                           static_cast<std::int64_t>(a.slots), HasPairs{a.touched}, s));
+                                           static_cast<std::int64_t>(a.space.slots),
+                                           HasPairs{a.touched, a.space.live_chunks}, s));
     CATGS_CUDA_CHECK(cudaMemcpyAsync(a.host_totals, a.totals, sizeof(ListTotals), cudaMemcpyDeviceToHost, s));
     CATGS_CUDA_CHECK(cudaStreamSynchronize(s));
     o.ranked = a.host_totals->with_pairs;
@@ -68,8 +75,9 @@ void sort(const SortArgs& a, cudaStream_t s) {
 
 std::uint64_t depth_order(const DepthOrderArgs& a, cudaStream_t s) {
     DepthOrderBuffers& o = *a.order;
-    if (a.slots > std::numeric_limits<std::uint32_t>::max())
-        throw Error("cuda renderer: " + std::to_string(a.slots) + " Gaussian slots, more than 32-bit slot ids hold");
+    if (a.space.slots > std::numeric_limits<std::uint32_t>::max())
+        throw Error("cuda renderer: " + std::to_string(a.space.slots) +
+                    " Gaussian slots, more than 32-bit slot ids hold");
     if (!a.reuse_selection) select_slots_with_pairs(a, s);
     const std::uint64_t m = o.ranked;
     o.ranked_offsets.reserve(m + 1, s);

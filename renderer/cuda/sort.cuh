@@ -26,7 +26,7 @@ struct SortArgs {
 void sort(const SortArgs& args, cudaStream_t stream);
 
 struct DepthOrderArgs {
-    std::uint64_t slots;
+    ChunkSpace space;              // the key frame's slots (live_chunks: not yet read back)
     const std::uint64_t* touched;  // per slot: its pairs (0: in no list, left out of the order)
     const float* depth;            // per slot: the depth its keys carry
     DepthOrderBuffers* order;      // out: order.order(), order.ranked of them
