@@ -3,8 +3,10 @@
 // a stream of its own. Each band's copy waits on the device's count of its drawn tiles
 // (rasterize and merge count them: tile_drawn), so the copy runs while the rest of the image
 // is drawn, in whatever order the bands finish (a horizon's long lists at the top of the image
-// finish last), and only the last band's is left once the last pixel is written. Where the
-// driver has no stream memory waits, a band waits for an event after the pass that drew it.
+// finish last, unless they are heavy lists, whose pixels reach the host on their own:
+// PixelOutputs::heavy_rgb8), and only the last band's is left once the last pixel is written.
+// Where the driver has no stream memory waits, a band waits for an event after the pass that
+// drew it.
 #pragma once
 
 #include <cuda_runtime_api.h>

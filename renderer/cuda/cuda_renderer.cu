@@ -226,7 +226,7 @@ FrameStats CudaRenderer<T>::Impl::draw(Frame<T>& f, const HostOutputs& out) {
         add_key_times();
     else
         add_cached_list_times();
-    copy_out(f, out);
+    copy_out(f, out, device);
     return frame_stats(f);
 }
 

@@ -90,6 +90,10 @@ struct CudaLimits {
     /// kHeavyListFactor: the unsplit lists this many times the mean that rasterize starts
     /// first; 0 keeps row order (tests compare the two: the order changes no pixel).
     double heavy_list_factor = kHeavyListFactor;
+    /// The heavy lists write an 8-bit image's pixels to host memory (PixelOutputs::heavy_rgb8),
+    /// so that no copy band waits for them; false draws them into the device's image (tests
+    /// compare the two).
+    bool heavy_pixels_to_host = true;
 };
 
 /// Host copies of the last frame's stage outputs, laid out as CpuRenderer's accessors are (partials

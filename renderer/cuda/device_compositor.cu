@@ -227,8 +227,10 @@ CompositeTimes DeviceCompositor::composite(const std::vector<DevicePartialImage>
         c.image_rgb.reserve(3 * pixels, c.stream);
         c.host_rgb.reserve(3 * pixels);
     }
-    args.out = PixelOutputs{
-        rgb8 ? c.image_rgb8.data() : nullptr, rgb ? c.image_rgb.data() : nullptr, nullptr, nullptr, nullptr, 1};
+    args.out = PixelOutputs{};
+    args.out.rgb8 = rgb8 ? c.image_rgb8.data() : nullptr;
+    args.out.rgb = rgb ? c.image_rgb.data() : nullptr;
+    args.out.rows_per_copy_band = 1;
 
     CATGS_CUDA_CHECK(cudaEventRecord(c.marks[Impl::start], c.stream));
     for (std::size_t s = 0; s < front_to_back.size(); ++s)

@@ -165,7 +165,8 @@ struct FrameBuffers {
 };
 
 /// Pinned host memory for one read-back: `reserve` reallocates to exactly what is asked when
-/// it is short.
+/// it is short. Mapped into the device as well, so that a kernel may write into it directly
+/// (PixelOutputs::heavy_rgb8) instead of a copy engine after it.
 template <typename V>
 class PinnedArray {
 public:
@@ -177,14 +178,18 @@ public:
     void reserve(std::size_t count) {
         if (bytes_ >= count * sizeof(V)) return;
         cudaFreeHost(data_);
-        data_ = nullptr;
-        CATGS_CUDA_CHECK(cudaMallocHost(&data_, count * sizeof(V)));
+        data_ = device_ = nullptr;
+        bytes_ = 0;  // nothing held should the allocation throw
+        CATGS_CUDA_CHECK(cudaHostAlloc(&data_, count * sizeof(V), cudaHostAllocMapped));
         bytes_ = count * sizeof(V);
+        CATGS_CUDA_CHECK(cudaHostGetDevicePointer(reinterpret_cast<void**>(&device_), data_, 0));
     }
-    V* data() const { return data_; }
+    V* data() const { return data_; }      // the host's address
+    V* device() const { return device_; }  // the kernels'
 
 private:
     V* data_ = nullptr;
+    V* device_ = nullptr;
     std::size_t bytes_ = 0;
 };
 
@@ -200,6 +205,8 @@ struct HostStaging {
     PinnedArray<float> rgb_float;
     PinnedArray<float> transmittance;  // copy_out of a partial frame
     PinnedArray<std::uint8_t> stopped;
+    PinnedArray<std::uint8_t> heavy_rgb8;  // rasterize's heavy lists (PixelOutputs::heavy_rgb8)
+    PinnedArray<std::uint32_t> heavy_tiles;
 };
 
 }  // namespace catgs::cuda

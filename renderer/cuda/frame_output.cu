@@ -6,7 +6,9 @@
 
 #include <algorithm>
 #include <cstddef>
+#include <string>
 
+#include "catgs/error.hpp"
 #include "copy_out.cuh"
 #include "cuda_check.hpp"
 #include "cuda_renderer.hpp"
@@ -17,12 +19,22 @@ namespace catgs::cuda {
 template <typename T>
 PixelOutputs CudaRenderer<T>::Impl::device_outputs(const Frame<T>& f, const HostOutputs& out) {
     PixelBuffers<T>& p = buffers.pixels;
-    return PixelOutputs{out.rgb8 ? p.image_rgb8.data() : nullptr,
+    PixelOutputs device{out.rgb8 ? p.image_rgb8.data() : nullptr,
                         out.rgb || out.any_partial() ? p.image_float.data() : nullptr,
                         out.any_partial() ? p.image_transmittance.data() : nullptr,
                         out.any_partial() ? p.image_stopped.data() : nullptr,
                         copy_waits_on_counts() ? copy.tiles_drawn : nullptr,
-                        rows_per_copy_band(f)};
+                        rows_per_copy_band(f),
+                        nullptr,
+                        nullptr};
+    if (heavy_pixels_to_host(f, out)) {
+        const std::uint64_t room = heavy_room();
+        host.heavy_rgb8.reserve(room * 3 * kTilePixels);
+        host.heavy_tiles.reserve(room);
+        device.heavy_rgb8 = host.heavy_rgb8.device();
+        device.heavy_tiles = host.heavy_tiles.device();
+    }
+    return device;
 }
 
 template <typename T>
@@ -77,10 +89,33 @@ void CudaRenderer<T>::Impl::end_copies() {
                                      cudaMemcpyDeviceToHost, stream));
 }
 
-/// The image into the caller's buffers, each copy band as soon as it is on the host (the rest
-/// are still being drawn or copied), then the frame's counters (end_copies enqueued them).
+/// The heavy lists' pixels, which rasterize wrote to host memory, into `image` (over what the
+/// copy bands brought of their tiles), once the frame's counters are on the host.
 template <typename T>
-void CudaRenderer<T>::Impl::copy_out(const Frame<T>& f, const HostOutputs& out) {
+void CudaRenderer<T>::Impl::take_heavy_pixels(const Frame<T>& f, ImageRGB8& image) {
+    if (!f.heavy_used) return;
+    const std::uint64_t listed = std::min<std::uint64_t>(host.counters.data()->tasks.heavy_tiles, heavy_room());
+    const int width = f.view.width, height = f.view.height;
+    for (std::uint64_t i = 0; i < listed; ++i) {
+        const std::uint32_t tile = host.heavy_tiles.data()[i];
+        if (tile >= f.tiles)
+            throw Error("cuda renderer: heavy list " + std::to_string(i) + " names tile " + std::to_string(tile) +
+                        " of " + std::to_string(f.tiles));
+        const int x0 = static_cast<int>(tile % f.view.tiles_x) * kTileSize;
+        const int y0 = static_cast<int>(tile / f.view.tiles_x) * kTileSize;
+        const int columns = std::min(kTileSize, width - x0), rows = std::min(kTileSize, height - y0);
+        const std::uint8_t* pixels = host.heavy_rgb8.data() + i * 3 * kTilePixels;
+        for (int r = 0; r < rows; ++r)
+            std::copy_n(pixels + 3 * r * kTileSize, 3 * columns,
+                        image.rgb.data() + 3 * (static_cast<std::size_t>(y0 + r) * width + x0));
+    }
+}
+
+/// The image into the caller's buffers, each copy band as soon as it is on the host (the rest
+/// are still being drawn or copied), then the frame's counters (end_copies enqueued them) and
+/// the heavy lists' pixels, when they came through host memory.
+template <typename T>
+void CudaRenderer<T>::Impl::copy_out(const Frame<T>& f, const HostOutputs& out, const PixelOutputs& device) {
     const int width = f.view.width, height = f.view.height;
     // Sized, not cleared: every value is overwritten below, and a stream of frames reuses them.
     if (out.rgb8) {
@@ -118,6 +153,7 @@ void CudaRenderer<T>::Impl::copy_out(const Frame<T>& f, const HostOutputs& out) 
         }
     }
     CATGS_CUDA_CHECK(cudaStreamSynchronize(stream));
+    if (device.heavy_rgb8) take_heavy_pixels(f, *out.rgb8);
     events.add(Stage::copy_out, Event::merge, Event::copy_out);
     if (out.device_partial) {
         DevicePartialImage& d = *out.device_partial;
@@ -138,7 +174,9 @@ template void CudaRenderer<float>::Impl::copy_drawn_rows(const Frame<float>&, in
 template void CudaRenderer<double>::Impl::copy_drawn_rows(const Frame<double>&, int, const HostOutputs&);
 template void CudaRenderer<float>::Impl::end_copies();
 template void CudaRenderer<double>::Impl::end_copies();
-template void CudaRenderer<float>::Impl::copy_out(const Frame<float>&, const HostOutputs&);
-template void CudaRenderer<double>::Impl::copy_out(const Frame<double>&, const HostOutputs&);
+template void CudaRenderer<float>::Impl::take_heavy_pixels(const Frame<float>&, ImageRGB8&);
+template void CudaRenderer<double>::Impl::take_heavy_pixels(const Frame<double>&, ImageRGB8&);
+template void CudaRenderer<float>::Impl::copy_out(const Frame<float>&, const HostOutputs&, const PixelOutputs&);
+template void CudaRenderer<double>::Impl::copy_out(const Frame<double>&, const HostOutputs&, const PixelOutputs&);
 
 }  // namespace catgs::cuda

@@ -147,7 +147,22 @@ struct PixelOutputs {
     /// rows (CopyStream::tiles_drawn); null when no copy waits on them.
     unsigned int* tiles_drawn;
     int rows_per_copy_band;
+    /// Where the heavy lists (TaskGrid::max_heavy) put their 8-bit pixels instead, or null (they
+    /// draw into rgb8 like the other tiles): host memory mapped into the device, a tile's 16x16
+    /// pixels row-major at its place in the heavy list, and the tile at the same place in
+    /// heavy_tiles. Such a tile counts as drawn when it starts, so no copy band waits for the
+    /// frame's longest lists, which rasterize starts first and which finish last; copy_out puts
+    /// their pixels into the image on the host. Only with rgb8 alone (rgb, transmittance and
+    /// stopped null).
+    std::uint8_t* heavy_rgb8;
+    std::uint32_t* heavy_tiles;
 };
+
+/// Counts a tile of row `tile_y` drawn without a fence: for a tile whose pixels go elsewhere
+/// (PixelOutputs::heavy_rgb8). One thread a block.
+__device__ inline void count_tile_drawn(const PixelOutputs& out, int tile_y) {
+    if (out.tiles_drawn) atomicAdd(&out.tiles_drawn[tile_y / out.rows_per_copy_band], 1u);
+}
 
 /// Called by every thread of a block that wrote the final pixels of a tile in row `tile_y`,
 /// once its writes are issued: the tile counts as drawn only after every thread's writes are
@@ -156,7 +171,7 @@ __device__ inline void tile_drawn(const PixelOutputs& out, int tile_y) {
     if (!out.tiles_drawn) return;  // uniform: a frame's outputs are the same for every block
     __threadfence();
     __syncthreads();
-    if (threadIdx.x == 0 && threadIdx.y == 0) atomicAdd(&out.tiles_drawn[tile_y / out.rows_per_copy_band], 1u);
+    if (threadIdx.x == 0 && threadIdx.y == 0) count_tile_drawn(out, tile_y);
 }
 
 /// Writes a final pixel: C + T * background, to 8-bit and/or float outputs, and T and the stop

@@ -149,6 +149,19 @@ __device__ inline bool task_of_block(const TaskGrid& grid, const TaskLabel* labe
     return grid.max_heavy == 0 || grid.runs_first[tile] == 0;
 }
 
+/// The place in the heavy list of the tile block `block` draws, when its pixels go to host
+/// memory (PixelOutputs::heavy_rgb8), else kNoSlot; from the launch's constants alone, so that
+/// it is asked again after the blend loop instead of held in a register through it.
+__device__ inline std::uint32_t heavy_to_host(const TaskGrid& grid, std::uint32_t block, std::uint32_t slot,
+                                              const PixelOutputs& out) {
+    if (!out.heavy_rgb8 || slot != kNoSlot) return kNoSlot;
+    if (grid.split) {
+        if (block < grid.max_extra) return kNoSlot;
+        block -= static_cast<std::uint32_t>(grid.max_extra);
+    }
+    return block < grid.max_heavy ? block : kNoSlot;
+}
+
 /// warp_done's value for a warp whose pixels are not all done.
 constexpr std::uint32_t kNotDone = 0xffffffffu;
 
@@ -199,6 +212,8 @@ __global__ void __launch_bounds__(PixelLayout<Pixels>::kThreads, resident_blocks
     // first Gaussian deeper than the cut.
     __shared__ float tile_cut;
     __shared__ float depths[CheckCut ? kBatch : 1];
+    // A heavy list's 8-bit pixels, on their way to host memory (PixelOutputs::heavy_rgb8).
+    __shared__ std::uint32_t heavy_words[kTilePixels * 3 / 4];
     std::uint32_t tile, index;
     if (!task_of_block(grid, labels, counters, blockIdx.x, tile, index)) return;  // uniform across the block
     const int tile_x = static_cast<int>(tile % view.tiles_x), tile_y = static_cast<int>(tile / view.tiles_x);
@@ -221,6 +236,8 @@ __global__ void __launch_bounds__(PixelLayout<Pixels>::kThreads, resident_blocks
         atomicMax(&counters->longest_list, static_cast<unsigned long long>(end - begin));
     const std::uint32_t slot = grid.split ? split_slot[tile] : kNoSlot;
     if (slot != kNoSlot) subtask_range(begin, end, counters->split_k, index, begin, end);
+    // Its pixels are not in the image the copy bands read: drawn as far as they care.
+    if (thread == 0 && heavy_to_host(grid, blockIdx.x, slot, out) != kNoSlot) count_tile_drawn(out, tile_y);
     const T threshold = StopAtMin || index == 0 ? static_cast<T>(kMinTransmittance) : tail_transmittance;
 
     if (CheckCut) {
@@ -308,16 +325,29 @@ __global__ void __launch_bounds__(PixelLayout<Pixels>::kThreads, resident_blocks
         const int y = tile_y * kTileSize + (layout.first_row + b / Layout::kCols) * kWarpBlockH + lane / kWarpBlockW;
         if (x >= view.width || y >= view.height) continue;
         const PixelAccumulator<T> pixel = acc[b].accumulator();
-        if (slot == kNoSlot) {
+        const bool to_host = heavy_to_host(grid, blockIdx.x, slot, out) != kNoSlot;
+        const int rank = (y - tile_y * kTileSize) * kTileSize + (x - tile_x * kTileSize);  // row-major in the tile
+        if (to_host) {
+            PixelOutputs staged{};
+            staged.rgb8 = reinterpret_cast<std::uint8_t*>(heavy_words);
+            write_pixel(pixel, background, static_cast<std::size_t>(rank), staged);
+        } else if (slot == kNoSlot) {
             write_pixel(pixel, background, static_cast<std::size_t>(y) * view.width + x, out);
         } else {
-            const int rank =
-                (y - tile_y * kTileSize) * kTileSize + (x - tile_x * kTileSize);  // the merge's pixel index
             partials[(static_cast<std::size_t>(slot) + index) * kTilePixels + rank] =
                 Partial<T>{pixel.colour, pixel.transmittance};
         }
     }
-    if (slot == kNoSlot) tile_drawn(out, tile_y);  // a split tile is drawn by merge
+    const std::uint32_t heavy = heavy_to_host(grid, blockIdx.x, slot, out);  // uniform across the block
+    if (heavy != kNoSlot) {
+        // In words: the rasterizer's byte stores reach host memory at a sixth of the link's rate.
+        __syncthreads();
+        std::uint32_t* words = reinterpret_cast<std::uint32_t*>(out.heavy_rgb8) + heavy * (kTilePixels * 3 / 4);
+        for (int w = thread; w < kTilePixels * 3 / 4; w += kThreads) words[w] = heavy_words[w];
+        if (thread == 0) out.heavy_tiles[heavy] = tile;
+    } else if (slot == kNoSlot) {
+        tile_drawn(out, tile_y);  // a split tile is drawn by merge
+    }
 }
 
 template <typename T, int Pixels>

@@ -128,6 +128,12 @@ struct CudaRenderer<T>::Impl {
     void begin_frame(const Frame<T>& f, const HostOutputs& out);
     /// Where this frame's kernels write, for `out`.
     PixelOutputs device_outputs(const Frame<T>& f, const HostOutputs& out);
+    /// Whether the heavy lists write their pixels to host memory (PixelOutputs::heavy_rgb8):
+    /// an 8-bit image alone, copied while it is drawn, in one pass (the list is per pass).
+    bool heavy_pixels_to_host(const Frame<T>& f, const HostOutputs& out) {
+        return limits.heavy_pixels_to_host && copy_waits_on_counts() && out.rgb8 && !out.rgb && !out.any_partial() &&
+               f.bands.size() == 1 && heavy_room() > 0;
+    }
     CopyOutArgs copy_out_args(const Frame<T>& f, const HostOutputs& out);
     // A key frame's lists.
     void chunk_cull(Frame<T>& f);
@@ -151,7 +157,9 @@ struct CudaRenderer<T>::Impl {
     void add_raster_times();
     void copy_drawn_rows(const Frame<T>& f, int rows_end, const HostOutputs& out);
     void end_copies();
-    void copy_out(const Frame<T>& f, const HostOutputs& out);
+    /// `device`: where the kernels wrote (device_outputs).
+    void copy_out(const Frame<T>& f, const HostOutputs& out, const PixelOutputs& device);
+    void take_heavy_pixels(const Frame<T>& f, ImageRGB8& image);
     void key_rendered(const Frame<T>& f, const FrameCounters& c);
     FrameStats frame_stats(const Frame<T>& f) const;
 

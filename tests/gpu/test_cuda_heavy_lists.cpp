@@ -2,7 +2,7 @@
 // starts the unsplit lists of at least the factor times the mean non-empty list right after the
 // extra sub-tasks. The device must list exactly the tiles the rule names, and the order must not
 // change a single pixel, in any task layout, split or not, in bands, on cached frames and in
-// partial frames. Skips without a CUDA device.
+// partial frames, nor may their pixels' way through host memory. Skips without a CUDA device.
 #include <gtest/gtest.h>
 
 #include <iostream>
@@ -94,18 +94,30 @@ TEST_F(CudaHeavyListsTest, TheDeviceListsTheTilesTheRuleNames) {
         }
 }
 
+/// Alternating views, or a steady glide where the cache is on (its cached frames).
+Camera pixels_view(bool glide, int frame) {
+    const double x = glide ? 0.01 * frame : 0.3 * (frame % 2);
+    return test::forward_camera(333, 250, 70.0, {x, 0.5 * x, 0.0});
+}
+
+RenderOptions split_at_64() {
+    RenderOptions split;
+    split.catgs.split_k = 64;
+    return split;
+}
+
+/// The cache on, planning from work counts: two renderers plan alike.
+RenderOptions cached_by_work() {
+    RenderOptions cached = default_pipeline_options();
+    cached.catgs.window_cost = WindowCost::work;
+    return cached;
+}
+
 TEST_F(CudaHeavyListsTest, TheOrderChangesNoPixel) {
     const Scene scene = clustered_scene("pixels");
     auto device_scene = std::make_shared<cuda::DeviceScene>(scene);
-    // Alternating views, or a steady glide where the cache is on (its cached frames).
-    auto view = [](bool glide, int frame) {
-        const double x = glide ? 0.01 * frame : 0.3 * (frame % 2);
-        return test::forward_camera(333, 250, 70.0, {x, 0.5 * x, 0.0});
-    };
-    RenderOptions split;
-    split.catgs.split_k = 64;
-    RenderOptions cached = default_pipeline_options();
-    cached.catgs.window_cost = WindowCost::work;  // plans from work counts: both renderers plan alike
+    auto view = pixels_view;
+    const RenderOptions split = split_at_64(), cached = cached_by_work();
     FrameStats one_pass;
     {
         cuda::CudaRenderer<float> probe;
@@ -147,6 +159,52 @@ TEST_F(CudaHeavyListsTest, TheOrderChangesNoPixel) {
         }
         if (c.max_pairs) {
             EXPECT_GT(banded, 0) << c.name;
+        }
+    }
+}
+
+/// An 8-bit image alone: the heavy lists write their pixels to host memory and copy_out puts
+/// them in place (CudaLimits::heavy_pixels_to_host); the image must be the one they draw on the
+/// device, frame after frame (a tile left out would show the last frame's pixels there).
+TEST_F(CudaHeavyListsTest, HeavyPixelsThroughHostMemoryChangeNoPixel) {
+    const Scene scene = clustered_scene("to host");
+    auto device_scene = std::make_shared<cuda::DeviceScene>(scene);
+    auto view = pixels_view;
+    const RenderOptions split = split_at_64(), cached = cached_by_work();
+    const struct {
+        std::string name;
+        RenderOptions options;
+        cuda::RasterLayout layout;
+        bool lists_heavy;  // split at 64, the cluster's long lists are all split: none runs first
+    } configs[] = {
+        {"one pixel a thread", RenderOptions{}, cuda::RasterLayout::pixel_per_thread, true},
+        {"two pixels a thread", RenderOptions{}, cuda::RasterLayout::two_pixels_per_thread, true},
+        {"split", split, cuda::RasterLayout::automatic, false},
+        {"cached frames", cached, cuda::RasterLayout::automatic, true},
+    };
+    for (const auto& c : configs) {
+        cuda::CudaLimits on_device{0, c.layout}, to_host{0, c.layout};
+        on_device.heavy_list_factor = to_host.heavy_list_factor = 1.5;
+        on_device.heavy_pixels_to_host = false;
+        cuda::CudaRenderer<float> a(nullptr, on_device), b(nullptr, to_host);
+        a.set_scene(device_scene);
+        b.set_scene(device_scene);
+        if (!b.copies_while_drawing()) {
+            std::cout << "[heavy lists] no stream memory waits: the heavy lists draw on the device" << std::endl;
+        }
+        const bool glide = c.options.catgs.cache != CacheMode::off;
+        std::size_t listed = 0;
+        for (int frame = 0; frame < 6; ++frame) {
+            const Camera camera = view(glide, frame);
+            ImageRGB8 image_a, image_b;
+            a.render(camera, c.options, &image_a, nullptr);
+            const FrameStats stats = b.render(camera, c.options, &image_b, nullptr);
+            const std::string what = c.name + ", frame " + std::to_string(frame);
+            ASSERT_EQ(image_a.rgb, image_b.rgb) << what;
+            if (stats.bands == 1) listed += b.read_back_stages().heavy_tiles.size();
+        }
+        if (c.lists_heavy) {
+            EXPECT_GT(listed, 0u) << c.name << ": no heavy list was drawn";
         }
     }
 }
