@@ -300,6 +300,12 @@ void CudaRenderer<T>::Impl::begin_frame(const Frame<T>& f, const HostOutputs& ou
     CATGS_CUDA_CHECK(
         cudaMemcpyAsync(&frame_counters()->min_depth_bits, &far_bits, sizeof(far_bits), cudaMemcpyHostToDevice, s));
     reserve_copy_out(copy_out_args(f, out), f.pixels);
+    // Here, since a pinned allocation synchronises the device; a frame planned in one pass
+    // may only leave it unused (device_outputs asks again once its bands are known).
+    if (heavy_pixels_to_host(f, out)) {
+        host.heavy_rgb8.reserve(heavy_room() * 3 * kTilePixels);
+        host.heavy_tiles.reserve(heavy_room());
+    }
     copied_copy_bands = 0;
     CATGS_CUDA_CHECK(cudaEventRecord(copy.ready, s));  // the tile counts are 0 from here
     events.clear();

@@ -27,10 +27,7 @@ PixelOutputs CudaRenderer<T>::Impl::device_outputs(const Frame<T>& f, const Host
                         rows_per_copy_band(f),
                         nullptr,
                         nullptr};
-    if (heavy_pixels_to_host(f, out)) {
-        const std::uint64_t room = heavy_room();
-        host.heavy_rgb8.reserve(room * 3 * kTilePixels);
-        host.heavy_tiles.reserve(room);
+    if (heavy_pixels_to_host(f, out)) {  // begin_frame reserved them
         device.heavy_rgb8 = host.heavy_rgb8.device();
         device.heavy_tiles = host.heavy_tiles.device();
     }

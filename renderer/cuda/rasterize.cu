@@ -319,15 +319,15 @@ __global__ void __launch_bounds__(PixelLayout<Pixels>::kThreads, resident_blocks
             recorded_cut[tile] = slot == kNoSlot ? stop_depth<kThreads / 32>(warp_done, values + begin, projected)
                                                  : INFINITY;  // a split tile's stop is not known here
     }
+    const std::uint32_t heavy = heavy_to_host(grid, blockIdx.x, slot, out);  // uniform across the block
 #pragma unroll
     for (int b = 0; b < Pixels; ++b) {
         const int x = tile_x * kTileSize + (layout.first_col + b % Layout::kCols) * kWarpBlockW + lane % kWarpBlockW;
         const int y = tile_y * kTileSize + (layout.first_row + b / Layout::kCols) * kWarpBlockH + lane / kWarpBlockW;
         if (x >= view.width || y >= view.height) continue;
         const PixelAccumulator<T> pixel = acc[b].accumulator();
-        const bool to_host = heavy_to_host(grid, blockIdx.x, slot, out) != kNoSlot;
         const int rank = (y - tile_y * kTileSize) * kTileSize + (x - tile_x * kTileSize);  // row-major in the tile
-        if (to_host) {
+        if (heavy != kNoSlot) {
             PixelOutputs staged{};
             staged.rgb8 = reinterpret_cast<std::uint8_t*>(heavy_words);
             write_pixel(pixel, background, static_cast<std::size_t>(rank), staged);
@@ -338,7 +338,6 @@ __global__ void __launch_bounds__(PixelLayout<Pixels>::kThreads, resident_blocks
                 Partial<T>{pixel.colour, pixel.transmittance};
         }
     }
-    const std::uint32_t heavy = heavy_to_host(grid, blockIdx.x, slot, out);  // uniform across the block
     if (heavy != kNoSlot) {
         // In words: the rasterizer's byte stores reach host memory at a sixth of the link's rate.
         __syncthreads();
