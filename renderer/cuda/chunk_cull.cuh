@@ -16,13 +16,14 @@ namespace catgs::cuda {
 template <typename T>
 struct ChunkCullArgs {
     const Chunk* chunks;
-    const std::uint32_t* all_chunks;  // 0..count-1: what the compaction picks from
     std::uint32_t count;
-    const View<T>* views;  // the window's poses
+    const View<T>* host_views;  // the window's poses in mapped pinned memory (HostStaging::views)
+    View<T>* views;             // where the later stages read them: chunk_cull puts them there
     int window;
     T guard, guard_translation;       // the envelope (cache.hpp); 0 without speculation
     ChunkBuffers* buffers;            // flags and the selected chunks
     unsigned long long* live_chunks;  // device: their count (ListTotals, read back with the totals)
+    unsigned int* ticket;             // 0 at the launch: the kernel's finished blocks
 };
 
 /// Flags and compacts the visible chunks into buffers->selected, their count into

@@ -322,18 +322,21 @@ void CudaRenderer<T>::Impl::chunk_cull(Frame<T>& f) {
     const RenderOptions& options = *f.options;
     const int w = static_cast<int>(f.plan.poses.size());
     for (int k = 0; k < w; ++k) host.views.data()[k] = make_view<T>(f.plan.poses[k], sc.origin(), f.near);
-    CATGS_CUDA_CHECK(cudaMemcpyAsync(buffers.window.views.data(), host.views.data(), w * sizeof(View<T>),
-                                     cudaMemcpyHostToDevice, stream));
     const std::uint32_t chunk_count = sc.chunk_count();
     key_space = ChunkSpace{sc.chunks(), sc.all_chunks(), static_cast<std::uint64_t>(chunk_count) * kChunkGaussians};
     key_chunks_culled = 0;
     if (options.chunk_culling && options.culling != Culling::exact && sc.partitioned() && chunk_count > 0) {
+        // The kernel reads the poses from the mapped staging itself and leaves them on the device.
         unsigned long long* live = &frame_counters()->lists.live_chunks;
-        cuda::chunk_cull(ChunkCullArgs<T>{sc.chunks(), sc.all_chunks(), chunk_count, buffers.window.views.data(), w,
-                                          f.guard, f.guard_translation, &buffers.chunks, live},
-                         stream);
+        cuda::chunk_cull(
+            ChunkCullArgs<T>{sc.chunks(), chunk_count, host.views.device(), buffers.window.views.data(), w, f.guard,
+                             f.guard_translation, &buffers.chunks, live, &frame_counters()->chunk_cull_blocks},
+            stream);
         key_space.selected = buffers.chunks.selected.data();
         key_space.live_chunks = live;
+    } else {
+        CATGS_CUDA_CHECK(cudaMemcpyAsync(buffers.window.views.data(), host.views.data(), w * sizeof(View<T>),
+                                         cudaMemcpyHostToDevice, stream));
     }
     events.record(Event::chunk_cull, stream);
 }

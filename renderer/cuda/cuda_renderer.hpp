@@ -1,11 +1,13 @@
 // The CUDA backend: the same stages as the CPU reference (stages/*.hpp are shared), on one
 // explicit stream per renderer instance, with grow-only device arenas.
 //
-//   chunk_cull  the chunks some pose of a key frame's window may see, compacted (CUB select)
+//   chunk_cull  the chunks some pose of a key frame's window may see, flagged and compacted
+//               in one kernel
 //   preprocess  one thread per Gaussian: cull, project, conic, SH colour, tile count
-//   scan        CUB exclusive sum of the 64-bit tile counts (the total read back once)
-//   keys        one thread per Gaussian writes (tile | depth) keys at its offset
-//   sort        CUB radix sort over the used key bits only (32 + bits of the tile count)
+//   sort        first the slots with pairs in depth order (CUB select, 32-bit CUB radix sort),
+//               after keys the pairs by tile id (a stable CUB radix sort of 16 or 32 bits)
+//   scan        CUB exclusive sum of the tile counts in depth order
+//   keys        each Gaussian's pairs (tile ids and its index) at its offset, in depth order
 //   ranges      per tile [begin, end) in the sorted list
 //   split       CaT-GS Algorithm 1: extra sub-tasks of long lists through an atomic task
 //               counter, each with a (tile, split index) label

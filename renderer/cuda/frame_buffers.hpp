@@ -35,9 +35,8 @@ struct WindowBuffers {
 struct ChunkBuffers {
     DeviceArray<std::uint8_t> flags;        // 1 = some pose may see the chunk
     DeviceArray<std::uint32_t> selected;    // the visible chunks, in scene order
-    DeviceArray<std::uint8_t> select_temp;  // CUB's DeviceSelect
 
-    std::size_t bytes() const { return flags.bytes() + selected.bytes() + select_temp.bytes(); }
+    std::size_t bytes() const { return flags.bytes() + selected.bytes(); }
 };
 
 /// Per Gaussian: the projection by Gaussian index, and the counts, depths and offsets by slot

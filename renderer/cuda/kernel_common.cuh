@@ -68,6 +68,7 @@ struct FrameCounters {
     double inverse_depth_sum;           // over visible Gaussians at the actual pose
     unsigned long long occluded;        // Gaussians the occlusion cut left out of the lists
     unsigned long long occluded_pairs;  // the pairs they would have had
+    unsigned int chunk_cull_blocks;     // chunk_cull: its blocks done (the last one compacts)
 };
 struct TaskCounters {
     unsigned long long rendered_pairs;  // ranges: pairs inside the grid (cached frames park others)

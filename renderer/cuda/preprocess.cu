@@ -200,7 +200,6 @@ __global__ void reproject_kernel(DeviceSceneView scene, ChunkSpace space, View<T
 
 template <typename T>
 void preprocess(const PreprocessArgs<T>& a, cudaStream_t s) {
-    CATGS_CUDA_CHECK(cudaMemsetAsync(a.touched + a.space.slots, 0, sizeof(std::uint64_t), s));
     if (a.space.slots == 0) return;
     const auto launch = [&](auto kernel, int threads, int window) {
         kernel<<<blocks_for(a.space.slots, threads), threads, 0, s>>>(
