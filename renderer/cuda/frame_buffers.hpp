@@ -33,8 +33,8 @@ struct WindowBuffers {
 
 /// Per chunk of the scene: chunk culling's flags and the compacted list of visible chunks.
 struct ChunkBuffers {
-    DeviceArray<std::uint8_t> flags;        // 1 = some pose may see the chunk
-    DeviceArray<std::uint32_t> selected;    // the visible chunks, in scene order
+    DeviceArray<std::uint8_t> flags;      // 1 = some pose may see the chunk
+    DeviceArray<std::uint32_t> selected;  // the visible chunks, in scene order
 
     std::size_t bytes() const { return flags.bytes() + selected.bytes(); }
 };
@@ -61,8 +61,27 @@ struct GaussianBuffers {
 /// The slots with pairs in depth order (depth_order, sort.cuh): their selection in slot order
 /// (a key frame's, which its cached frames keep), then the slots front to back,
 /// double-buffered for the sort, and their pair counts and scanned offsets in that order.
+/// A CUDA event made on first use (no timing): a point the host waits for.
+class HostWaitEvent {
+public:
+    HostWaitEvent() = default;
+    HostWaitEvent(const HostWaitEvent&) = delete;
+    HostWaitEvent& operator=(const HostWaitEvent&) = delete;
+    ~HostWaitEvent() {
+        if (event_) cudaEventDestroy(event_);  // not checked: runs in destructors
+    }
+    cudaEvent_t get() {
+        if (!event_) CATGS_CUDA_CHECK(cudaEventCreateWithFlags(&event_, cudaEventDisableTiming));
+        return event_;
+    }
+
+private:
+    cudaEvent_t event_ = nullptr;
+};
+
 struct DepthOrderBuffers {
     DeviceArray<std::uint32_t> with_pairs;  // the slots with pairs, ascending
+    HostWaitEvent totals_read;              // the key frame's ListTotals are in host memory
     DeviceArray<std::uint8_t> select_temp;
     std::uint64_t ranked = 0;                   // the selected count, read back (ListTotals)
     DeviceArray<std::uint32_t> keys[2];         // depth bits

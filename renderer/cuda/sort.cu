@@ -4,6 +4,7 @@
 #include <cub/device/device_select.cuh>
 #include <thrust/iterator/counting_iterator.h>
 
+#include <algorithm>
 #include <limits>
 #include <string>
 
@@ -23,10 +24,11 @@ struct HasPairs {
     }
 };
 
-__global__ void depth_keys_kernel(std::uint64_t n, const std::uint32_t* with_pairs, const float* depth,
-                                  std::uint32_t* keys, std::uint32_t* slots) {
+// n: the slots the buffers hold; selected (when not null): how many the select kept, on the device.
+__global__ void depth_keys_kernel(std::uint64_t n, const unsigned long long* selected, const std::uint32_t* with_pairs,
+                                  const float* depth, std::uint32_t* keys, std::uint32_t* slots) {
     const std::uint64_t k = static_cast<std::uint64_t>(blockIdx.x) * blockDim.x + threadIdx.x;
-    if (k >= n) return;
+    if (k >= n || (selected && k >= *selected)) return;
     const std::uint32_t slot = with_pairs[k];
     // The bits make_sort_key puts in the low half of a pair's key (depth > 0 orders like them).
     keys[k] = __float_as_uint(depth[slot]);
@@ -50,8 +52,18 @@ void select_slots_with_pairs(const DepthOrderArgs& a, cudaStream_t s) {
                                            static_cast<std::int64_t>(a.space.slots),
                                            HasPairs{a.touched, a.space.live_chunks}, s));
     CATGS_CUDA_CHECK(cudaMemcpyAsync(a.host_totals, a.totals, sizeof(ListTotals), cudaMemcpyDeviceToHost, s));
-    CATGS_CUDA_CHECK(cudaStreamSynchronize(s));
-    o.ranked = a.host_totals->with_pairs;
+    CATGS_CUDA_CHECK(cudaEventRecord(o.totals_read.get(), s));
+}
+
+std::uint64_t depth_key_room(const DepthOrderBuffers& o) {
+    return std::min({o.keys[0].capacity(), o.keys[1].capacity(), o.slots[0].capacity(), o.slots[1].capacity()});
+}
+
+void launch_depth_keys(std::uint64_t n, const unsigned long long* selected, const DepthOrderArgs& a, cudaStream_t s) {
+    DepthOrderBuffers& o = *a.order;
+    depth_keys_kernel<<<blocks_for(n, kThreads), kThreads, 0, s>>>(n, selected, o.with_pairs.data(), a.depth,
+                                                                   o.keys[0].data(), o.slots[0].data());
+    CATGS_CUDA_CHECK_LAUNCH("depth_keys_kernel");
 }
 
 }  // namespace
@@ -78,18 +90,28 @@ std::uint64_t depth_order(const DepthOrderArgs& a, cudaStream_t s) {
     if (a.space.slots > std::numeric_limits<std::uint32_t>::max())
         throw Error("cuda renderer: " + std::to_string(a.space.slots) +
                     " Gaussian slots, more than 32-bit slot ids hold");
-    if (!a.reuse_selection) select_slots_with_pairs(a, s);
+    // A key frame's count reaches the host while the GPU already writes the depth keys of as
+    // many selected slots as the buffers hold (bounded by the count on the device): the host's
+    // wake-up and its next launches then overlap work instead of an idle GPU.
+    std::uint64_t keyed = 0;
+    if (!a.reuse_selection) {
+        select_slots_with_pairs(a, s);
+        keyed = std::min<std::uint64_t>(depth_key_room(o), a.space.slots);
+        if (keyed > 0) launch_depth_keys(keyed, &a.totals->with_pairs, a, s);
+        CATGS_CUDA_CHECK(cudaEventSynchronize(o.totals_read.get()));
+        o.ranked = a.host_totals->with_pairs;
+    }
     const std::uint64_t m = o.ranked;
     o.ranked_offsets.reserve(m + 1, s);
+    // Arenas grow by kArenaGrowth, so a count rising along a path seldom outgrows the room the
+    // keys were written into before the wait (and is keyed again here when it does).
     for (int k = 0; k < 2; ++k) {
         o.keys[k].reserve(m, s);
         o.slots[k].reserve(m, s);
     }
     o.current = 0;
     if (m > 0) {
-        depth_keys_kernel<<<blocks_for(m, kThreads), kThreads, 0, s>>>(m, o.with_pairs.data(), a.depth,
-                                                                       o.keys[0].data(), o.slots[0].data());
-        CATGS_CUDA_CHECK_LAUNCH("depth_keys_kernel");
+        if (m > keyed) launch_depth_keys(m, nullptr, a, s);
         cub::DoubleBuffer<std::uint32_t> kb(o.keys[0].data(), o.keys[1].data());
         cub::DoubleBuffer<std::uint32_t> vb(o.slots[0].data(), o.slots[1].data());
         std::size_t temp_bytes = 0;
