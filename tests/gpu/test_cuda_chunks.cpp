@@ -96,6 +96,58 @@ TEST_F(CudaChunkTest, SpeculativeCacheDrawsTheSameFrames) {
     EXPECT_GT(cached, 12);
 }
 
+// chunk_cull against the CPU's chunk test, on 8000 chunks of one Gaussian each (32 blocks of
+// the kernel, four steps of its last block's compaction): the chunks each key frame keeps, in
+// float and double, for single poses and windows of 2 and 16 poses (the poses staged in shared
+// memory), while the images equal the ones drawn without chunk culling (a chunk lost or out of
+// order in the compaction would move a Gaussian or its depth ties).
+template <typename T>
+void expect_chunk_counts_of_the_cpu(const Scene& scene, std::uint64_t seed) {
+    cuda::CudaRenderer<T> gpu, whole;
+    gpu.set_scene(std::make_shared<cuda::DeviceScene>(scene, gpu.stream()));
+    whole.set_scene(std::make_shared<cuda::DeviceScene>(scene, whole.stream()));
+    CpuRenderer<T> cpu;
+    std::mt19937_64 rng(seed);
+    int keys = 0;
+    for (int window : {1, 2, 16}) {
+        RenderOptions o;
+        if (window > 1) {
+            o.catgs.cache = CacheMode::speculative;
+            o.catgs.window = window;
+        }
+        RenderOptions unculled = o;
+        unculled.chunk_culling = false;
+        for (int path = 0; path < 3; ++path) {
+            gpu.reset_cache();
+            whole.reset_cache();
+            cpu.reset_cache();
+            for (const Camera& cam : jittered_path(rng)) {
+                ImageRGB8 with, without;
+                ImageF reference;
+                const FrameStats g = gpu.render(cam, o, &with, nullptr);
+                whole.render(cam, unculled, &without, nullptr);
+                const FrameStats c = cpu.render(scene, cam, o, reference);
+                ASSERT_EQ(g.key_frame, c.key_frame) << "window " << window << " (CATGS_TEST_SEED=" << seed << ")";
+                ASSERT_EQ(with.rgb, without.rgb) << "window " << window << " (CATGS_TEST_SEED=" << seed << ")";
+                if (!g.key_frame) continue;
+                ++keys;
+                EXPECT_EQ(g.chunks, scene.chunks.size());
+                ASSERT_EQ(g.chunks_culled, c.chunks_culled)
+                    << "window " << window << " path " << path << " (CATGS_TEST_SEED=" << seed << ")";
+            }
+        }
+    }
+    EXPECT_GT(keys, 20);
+}
+
+TEST_F(CudaChunkTest, ChunkCullKeepsTheCpuChunksOverManyBlocks) {
+    const std::uint64_t seed = test::fresh_seed("cuda chunk_cull against the cpu");
+    const Scene scene = single_gaussian_chunks(surrounding_scene(seed, 8000));
+    ASSERT_GT(scene.chunks.size(), 4096u);
+    expect_chunk_counts_of_the_cpu<float>(scene, seed);
+    expect_chunk_counts_of_the_cpu<double>(scene, seed);
+}
+
 // The built-in city as loaded (partitioned), on a survey path: the GPU with chunk culling
 // against the CPU reference, and the share of chunks a survey frame skips.
 TEST_F(CudaChunkTest, PartitionedCityMatchesTheCpuReference) {
