@@ -17,7 +17,8 @@ template <typename T>
 struct ChunkCullArgs {
     const Chunk* chunks;
     std::uint32_t count;
-    const View<T>* host_views;  // the window's poses in mapped pinned memory (HostStaging::views)
+    View<T> first_view;         // the window's first pose (by value: a plain frame's only one)
+    const View<T>* host_views;  // all of its poses in mapped pinned memory (HostStaging::views)
     View<T>* views;             // where the later stages read them: chunk_cull puts them there
     int window;
     T guard, guard_translation;       // the envelope (cache.hpp); 0 without speculation

@@ -328,10 +328,10 @@ void CudaRenderer<T>::Impl::chunk_cull(Frame<T>& f) {
     if (options.chunk_culling && options.culling != Culling::exact && sc.partitioned() && chunk_count > 0) {
         // The kernel reads the poses from the mapped staging itself and leaves them on the device.
         unsigned long long* live = &frame_counters()->lists.live_chunks;
-        cuda::chunk_cull(
-            ChunkCullArgs<T>{sc.chunks(), chunk_count, host.views.device(), buffers.window.views.data(), w, f.guard,
-                             f.guard_translation, &buffers.chunks, live, &frame_counters()->chunk_cull_blocks},
-            stream);
+        cuda::chunk_cull(ChunkCullArgs<T>{sc.chunks(), chunk_count, host.views.data()[0], host.views.device(),
+                                          buffers.window.views.data(), w, f.guard, f.guard_translation, &buffers.chunks,
+                                          live, &frame_counters()->chunk_cull_blocks},
+                         stream);
         key_space.selected = buffers.chunks.selected.data();
         key_space.live_chunks = live;
     } else {

@@ -96,11 +96,12 @@ TEST_F(CudaChunkTest, SpeculativeCacheDrawsTheSameFrames) {
     EXPECT_GT(cached, 12);
 }
 
-// chunk_cull against the CPU's chunk test, on 8000 chunks of one Gaussian each (32 blocks of
-// the kernel, four steps of its last block's compaction): the chunks each key frame keeps, in
-// float and double, for single poses and windows of 2 and 16 poses (the poses staged in shared
-// memory), while the images equal the ones drawn without chunk culling (a chunk lost or out of
-// order in the compaction would move a Gaussian or its depth ties).
+// chunk_cull against the CPU's chunk test, on 40000 chunks of one Gaussian each (79 blocks of
+// the kernel, three steps of its last block's compaction, the last one partial): the chunks
+// each key frame keeps, in float and double, for single poses (the pose passed by value) and
+// windows of 2 and 16 poses (the others read from mapped host memory), while the images equal
+// the ones drawn without chunk culling (a chunk lost or out of order in the compaction would
+// move a Gaussian or its depth ties).
 template <typename T>
 void expect_chunk_counts_of_the_cpu(const Scene& scene, std::uint64_t seed) {
     cuda::CudaRenderer<T> gpu, whole;
@@ -142,8 +143,8 @@ void expect_chunk_counts_of_the_cpu(const Scene& scene, std::uint64_t seed) {
 
 TEST_F(CudaChunkTest, ChunkCullKeepsTheCpuChunksOverManyBlocks) {
     const std::uint64_t seed = test::fresh_seed("cuda chunk_cull against the cpu");
-    const Scene scene = single_gaussian_chunks(surrounding_scene(seed, 8000));
-    ASSERT_GT(scene.chunks.size(), 4096u);
+    const Scene scene = single_gaussian_chunks(surrounding_scene(seed, 40000));
+    ASSERT_GT(scene.chunks.size(), 2u * 16384u);
     expect_chunk_counts_of_the_cpu<float>(scene, seed);
     expect_chunk_counts_of_the_cpu<double>(scene, seed);
 }
