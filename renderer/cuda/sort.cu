@@ -35,8 +35,9 @@ __global__ void depth_keys_kernel(std::uint64_t n, const unsigned long long* sel
     slots[k] = slot;
 }
 
-/// The slots with pairs, in slot order (a stable CUB select), and how many there are, read
-/// back with the pair total beside it (one read-back: synchronises the stream).
+/// The slots with pairs, in slot order (a stable CUB select), and how many there are, copied
+/// to the host with the pair total beside it; `totals_read` marks the copy's end, which
+/// depth_order waits for.
 void select_slots_with_pairs(const DepthOrderArgs& a, cudaStream_t s) {
     if (!a.totals || !a.host_totals) throw Error("cuda renderer: depth order selects slots without its list totals");
     DepthOrderBuffers& o = *a.order;
