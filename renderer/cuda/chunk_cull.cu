@@ -1,6 +1,7 @@
 #include "chunk_cull.cuh"
 
 #include <cub/block/block_scan.cuh>
+#include <string>
 
 #include "catgs/constants.hpp"
 #include "catgs/error.hpp"
@@ -100,7 +101,9 @@ __global__ void __launch_bounds__(kCullThreads)
 
 template <typename T>
 void chunk_cull(const ChunkCullArgs<T>& a, cudaStream_t s) {
-    if (a.window < 1 || a.window > kMaxWindow) throw Error("cuda renderer: chunk_cull over a window outside 1..16");
+    if (a.window < 1 || a.window > kMaxWindow)
+        throw Error("cuda renderer: chunk_cull over a window of " + std::to_string(a.window) + " poses, outside 1.." +
+                    std::to_string(kMaxWindow));
     ChunkBuffers& b = *a.buffers;
     b.flags.reserve(a.count, s);
     b.selected.reserve(a.count, s);
