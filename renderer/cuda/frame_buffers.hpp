@@ -58,9 +58,6 @@ struct GaussianBuffers {
     }
 };
 
-/// The slots with pairs in depth order (depth_order, sort.cuh): their selection in slot order
-/// (a key frame's, which its cached frames keep), then the slots front to back,
-/// double-buffered for the sort, and their pair counts and scanned offsets in that order.
 /// A CUDA event made on first use (no timing): a point the host waits for.
 class HostWaitEvent {
 public:
@@ -79,6 +76,9 @@ private:
     cudaEvent_t event_ = nullptr;
 };
 
+/// The slots with pairs in depth order (depth_order, sort.cuh): their selection in slot order
+/// (a key frame's, which its cached frames keep), then the slots front to back,
+/// double-buffered for the sort, and their pair counts and scanned offsets in that order.
 struct DepthOrderBuffers {
     DeviceArray<std::uint32_t> with_pairs;  // the slots with pairs, ascending
     HostWaitEvent totals_read;              // the key frame's ListTotals are in host memory
