@@ -4,9 +4,11 @@
 #include <atomic>
 #include <chrono>
 #include <cmath>
+#include <condition_variable>
 #include <cstdio>
 #include <fstream>
 #include <map>
+#include <mutex>
 #include <nlohmann/json.hpp>
 #include <string>
 #include <thread>
@@ -31,7 +33,10 @@ struct LoadTotals {
 };
 
 /// `streams` copies of `plan`, each a viewer of its own, run at once; progress once a second.
-std::vector<StreamResult> run_streams(const Connection& conn, const StreamPlan& plan, int streams) {
+/// `*streams_end` is when the last stream ended: the progress line's pending sleep must not
+/// count in the run's wall time (it once added up to a second to it).
+std::vector<StreamResult> run_streams(const Connection& conn, const StreamPlan& plan, int streams,
+                                      Clock::time_point* streams_end) {
     std::vector<StreamResult> results(static_cast<std::size_t>(streams));
     std::atomic<std::uint64_t> frames_total{0};
     std::vector<std::thread> threads;
@@ -55,12 +60,16 @@ std::vector<StreamResult> run_streams(const Connection& conn, const StreamPlan& 
                 [i](const std::string& line) { std::fprintf(stderr, "[stream %d] %s\n", i, line.c_str()); });
         });
     }
-    std::atomic<bool> done{false};
+    std::mutex progress_mutex;
+    std::condition_variable streams_done;
+    bool done = false;
     std::thread progress([&] {
         std::uint64_t last = 0;
-        while (!done) {
-            std::this_thread::sleep_for(std::chrono::seconds(1));
-            if (done) break;
+        for (Clock::time_point next = start + std::chrono::seconds(1);; next += std::chrono::seconds(1)) {
+            {
+                std::unique_lock lock(progress_mutex);
+                if (streams_done.wait_until(lock, next, [&] { return done; })) break;
+            }
             const std::uint64_t now = frames_total;
             std::fprintf(stderr, "t=%5.1fs  %llu frames/s over %d streams\n",
                          std::chrono::duration<double>(Clock::now() - start).count(),
@@ -69,7 +78,12 @@ std::vector<StreamResult> run_streams(const Connection& conn, const StreamPlan& 
         }
     });
     for (auto& t : threads) t.join();
-    done = true;
+    *streams_end = Clock::now();
+    {
+        std::lock_guard lock(progress_mutex);
+        done = true;
+    }
+    streams_done.notify_all();
     progress.join();
     return results;
 }
@@ -93,8 +107,10 @@ LoadTotals add_up(const std::vector<StreamResult>& results) {
 
 /// The run's two time bases. `elapsed` is the wall time from before the first connection to the
 /// end of the last stream, each stream's setup and its last frames included; `schedule` is how
-/// long the poses' open-loop schedule lasts. A server that answers every pose delivers streams x
-/// rate frames per second of the schedule, whatever its setup costs; over `elapsed` it cannot.
+/// long the poses' open-loop schedule lasts (poses / rate: the last pose goes out one period
+/// before its end). A server that answers every pose delivers streams x rate frames per second
+/// of the schedule, whatever its setup costs; over `elapsed` only as much as the setup and the
+/// last frame's latency take less than one pose period.
 struct LoadTimes {
     double elapsed_s, schedule_s;
 };
@@ -191,8 +207,9 @@ int run_load_command(const Connection& conn, const LoadArgs& args) {
     plan.max_duration = std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(args.duration));
 
     const Clock::time_point start = Clock::now();
-    const std::vector<StreamResult> results = run_streams(conn, plan, args.streams);
-    const LoadTimes times{std::chrono::duration<double>(Clock::now() - start).count(),
+    Clock::time_point streams_end;
+    const std::vector<StreamResult> results = run_streams(conn, plan, args.streams, &streams_end);
+    const LoadTimes times{std::chrono::duration<double>(streams_end - start).count(),
                           static_cast<double>(plan.poses) / f.rate};
 
     const LoadTotals totals = add_up(results);
