@@ -203,10 +203,10 @@ FrameStats CudaRenderer<T>::Impl::draw(Frame<T>& f, const HostOutputs& out) {
         f.heavy_used = cached_heavy;
     }
     const PixelOutputs device = device_outputs(f, out);
+    const Event pass_start = f.bands.size() > 1 ? Event::band_scan : Event::scan;
     for (const TileRows& rows : f.bands) {
         const bool last_band = &rows == &f.bands.back();
         std::uint64_t pairs = f.total;
-        const Event pass_start = f.bands.size() > 1 ? Event::band_scan : Event::scan;
         if (f.plan.key) {
             if (f.bands.size() > 1) pairs = count_band(f, rows);
             keys(f, rows, pairs);
@@ -218,15 +218,17 @@ FrameStats CudaRenderer<T>::Impl::draw(Frame<T>& f, const HostOutputs& out) {
         // Enqueued before the host waits on this band, so that its copies overlap what follows.
         copy_drawn_rows(f, rows.end, out);
         if (last_band) end_copies();
-        // Once the band is drawn; the next band marks its list stages again.
-        add_raster_times();
-        if (f.plan.key) add_list_times(pass_start);
+        // The next band marks its stages again, so a band's times are read once it is drawn;
+        // the last band's only after copy_out, so that the host takes each band of the image
+        // as its copy ends rather than after the last tile (reading them waits for merge).
+        if (!last_band) add_pass_times(f, pass_start);
     }
+    copy_out(f, out, device);
+    add_pass_times(f, pass_start);
     if (f.plan.key)
         add_key_times();
     else
         add_cached_list_times();
-    copy_out(f, out, device);
     return frame_stats(f);
 }
 
@@ -570,8 +572,15 @@ void CudaRenderer<T>::Impl::merge(const Frame<T>& f, std::uint64_t pairs, const 
     events.record(Event::merge, stream);
 }
 
-/// A band's rasterize and merge times, once its copies are enqueued (a banded frame marks
-/// them again for the next band).
+/// A band's stage times (rasterize, merge and, on a key frame, its lists), once its copies are
+/// enqueued (a banded frame marks them again for the next band).
+template <typename T>
+void CudaRenderer<T>::Impl::add_pass_times(const Frame<T>& f, Event pass_start) {
+    add_raster_times();
+    if (f.plan.key) add_list_times(pass_start);
+}
+
+/// Waits for the band's merge.
 template <typename T>
 void CudaRenderer<T>::Impl::add_raster_times() {
     events.synchronize(Event::merge);
