@@ -486,10 +486,10 @@ void CudaRenderer<T>::Impl::ranges_and_split(Frame<T>& f, std::uint64_t pairs) {
     const cudaStream_t s = stream;
     const CatgsOptions& catgs = f.options->catgs;
     TileBuffers& t = buffers.tiles;
-    cuda::ranges(
-        RangesArgs{pairs, buffers.pairs.sorted_tiles(), static_cast<std::uint32_t>(f.tiles), f.shared_list,
-                   catgs.split_auto ? 0 : catgs.split_k, t.range_begin.data(), t.range_end.data(), task_counters()},
-        s);
+    cuda::ranges(RangesArgs{pairs, buffers.pairs.sorted_tiles(), static_cast<std::uint32_t>(f.tiles), f.shared_list,
+                            catgs.split_auto ? 0 : catgs.split_k, t.range_begin.data(), t.range_end.data(),
+                            task_counters(), &frame_counters()->ranges},
+                 s);
     events.record(Event::ranges, s);
     // Exact culling shares one list, which this task layout neither splits nor reorders.
     const bool lists = !f.shared_list && pairs > 0;

@@ -60,6 +60,12 @@ struct ListTotals {
 /// Device-side counters, one allocation, read back once per frame. The frame part is reset
 /// every frame; the task part belongs to the task list, which cached frames reuse from their
 /// key frame, so only a key frame's split pass resets it.
+/// ranges' blocks meet here: the last to finish writes the task counters and clears both
+/// again for the next band.
+struct RangesTally {
+    unsigned int blocks_done;
+    unsigned int nonempty_tiles;  // of the blocks done so far
+};
 struct FrameCounters {
     ListTotals lists;
     unsigned long long visible;         // Gaussians with tiles at the actual pose
@@ -69,6 +75,7 @@ struct FrameCounters {
     unsigned long long occluded;        // Gaussians the occlusion cut left out of the lists
     unsigned long long occluded_pairs;  // the pairs they would have had
     unsigned int chunk_cull_blocks;     // chunk_cull: its blocks done (the last one compacts)
+    RangesTally ranges;
 };
 struct TaskCounters {
     unsigned long long rendered_pairs;  // ranges: pairs inside the grid (cached frames park others)

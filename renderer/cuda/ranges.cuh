@@ -20,6 +20,7 @@ struct RangesArgs {
     std::uint64_t* range_begin;
     std::uint64_t* range_end;
     TaskCounters* counters;
+    RangesTally* tally;  // zero when the frame begins; ranges leaves it zero
 };
 
 void ranges(const RangesArgs& args, cudaStream_t stream);

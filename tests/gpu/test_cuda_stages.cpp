@@ -512,8 +512,10 @@ void check_tasks_and_partials(const CpuRenderer<float>& cpu, std::uint32_t cpu_k
 }
 
 TEST_F(CudaStagesTest, FloatStagesDifferOnlyInTheBoundaryBand) {
-    for (int trial = 0; trial < 2; ++trial) {
-        const Camera camera = test::forward_camera(333 + 64 * trial, 197 + 32 * trial, 75.0);
+    // 273 and 375 tiles, and 512: ranges' last thread block ends exactly at the grid's end.
+    const int sizes[][2] = {{333, 197}, {397, 229}, {512, 256}};
+    for (int trial = 0; trial < 3; ++trial) {
+        const Camera camera = test::forward_camera(sizes[trial][0], sizes[trial][1], 75.0);
         const TestScene lists = stage_scene("float " + std::to_string(trial), Culling::opacity_aware);
         const TestScene exact = stage_scene("float exact " + std::to_string(trial), Culling::exact);
         for (const Case& c : cases()) {
