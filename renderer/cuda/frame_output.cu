@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <cstddef>
 #include <string>
+#include <type_traits>
 
 #include "catgs/error.hpp"
 #include "copy_out.cuh"
@@ -134,12 +135,24 @@ void CudaRenderer<T>::Impl::copy_out(const Frame<T>& f, const HostOutputs& out, 
         p.stopped.resize(f.pixels);
     }
     const int per_band = rows_per_copy_band(f) * kTileSize;
+    // Large images are taken by the copier's threads, each band as it lands; the guard waits
+    // for them before anything else reads the image, also when a CUDA call below throws.
+    const bool spread = 3 * f.pixels >= kSpreadCopyBytes;
+    HostCopiesDone taken(host_copier);
     for (int band = 0; band * per_band < height; ++band) {
         CATGS_CUDA_CHECK(cudaEventSynchronize(copy.copied[band]));
         const std::size_t first = static_cast<std::size_t>(band) * per_band * width;
         const std::size_t count = static_cast<std::size_t>(std::min(per_band, height - band * per_band)) * width;
         auto take = [&](auto* host_values, auto& values, std::size_t channels) {
-            std::copy_n(host_values + channels * first, channels * count, values.data() + channels * first);
+            const auto* source = host_values + channels * first;
+            auto* target = values.data() + channels * first;
+            static_assert(std::is_same_v<std::remove_cv_t<std::remove_pointer_t<decltype(source)>>,
+                                         std::remove_pointer_t<decltype(target)>>,
+                          "the staging holds the caller's value type");
+            if (spread)
+                host_copier.copy(target, source, channels * count * sizeof(*source));
+            else
+                std::copy_n(source, channels * count, target);
         };
         if (out.rgb8) take(host.rgb8.data(), out.rgb8->rgb, 3);
         if (out.rgb) take(host.rgb_float.data(), out.rgb->rgb, 3);
@@ -150,6 +163,7 @@ void CudaRenderer<T>::Impl::copy_out(const Frame<T>& f, const HostOutputs& out, 
         }
     }
     CATGS_CUDA_CHECK(cudaStreamSynchronize(stream));
+    host_copier.wait();  // the heavy lists' pixels go over what the bands brought
     if (device.heavy_rgb8) take_heavy_pixels(f, *out.rgb8);
     events.add(Stage::copy_out, Event::merge, Event::copy_out);
     if (out.device_partial) {

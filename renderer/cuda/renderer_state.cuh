@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "catgs/cache.hpp"
+#include "catgs/host_copier.hpp"
 #include "catgs/occlusion_tracker.hpp"
 #include "catgs/render_options.hpp"
 #include "catgs/stages/tiles.hpp"
@@ -82,6 +83,16 @@ struct HostOutputs {
     bool any_partial() const { return partial || device_partial; }
 };
 
+/// Threads beside the caller that take a large image out of the pinned staging (copy_out): one
+/// thread copies ~12 GB/s, below the link's ~40 GB/s, so at 4K the host held the image ~1.5 ms
+/// after the GPU's last copy; with three helpers the caller's median wait on garden low 4K fell
+/// from 4.3-4.5 to 2.9-3.0 ms (GPU frame 2.02 ms; H100, session 38). Images below
+/// kSpreadCopyBytes are copied by the caller alone: at 1080p (6.2 MB) the spread copy moved the
+/// median by -0.2 to +0.1 ms and raised the mean by up to 0.4 ms on one path (the helpers'
+/// wake-ups), so it starts above 2560x1440 RGB8 (11 MB).
+inline constexpr int kHostCopyHelpers = 3;
+inline constexpr std::size_t kSpreadCopyBytes = std::size_t{16} << 20;
+
 template <typename T>
 struct CudaRenderer<T>::Impl {
     cudaStream_t stream = nullptr;
@@ -98,7 +109,8 @@ struct CudaRenderer<T>::Impl {
     std::uint64_t key_chunks_culled = 0;
     FrameBuffers<T> buffers;
     HostStaging<T> host;
-    LastFrame last;  // read_back_stages
+    HostCopier host_copier{kHostCopyHelpers};  // copy_out's takes of large images
+    LastFrame last;                            // read_back_stages
     OcclusionTracker occlusion;
     CopyStreams copy;
     bool copy_waits = stream_memory_waits_available();  // false once the driver refused one

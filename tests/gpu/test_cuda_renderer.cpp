@@ -102,6 +102,29 @@ TEST_F(CudaRendererTest, RandomScenesMatchCpuInEveryCullingMode) {
     expect_matches_cpu(scene, test::forward_camera(120, 80, 70.0), exact, "exact");
 }
 
+// A 4K image (24.9 MB of RGB8) leaves the pinned staging through the renderer's helper
+// threads (copy_out spreads images of 16 MiB and more, renderer_state.cuh): each frame of a
+// moving camera, through one renderer, matches the CPU's.
+TEST_F(CudaRendererTest, FourKImagesTakenBySeveralThreadsMatchCpu) {
+    static_assert(3 * 3840 * 2160 >= (16 << 20), "the frame must be above copy_out's spread size");
+    test::RandomSceneParams p;
+    p.count = 20000;
+    const Scene scene = test::random_scene(test::fresh_seed("cuda 4k copy"), p);
+    cuda::CudaRenderer<float> renderer;
+    renderer.set_scene(std::make_shared<cuda::DeviceScene>(scene, renderer.stream()));
+    ImageRGB8 gpu;
+    for (int frame = 0; frame < 3; ++frame) {
+        const Camera cam = test::forward_camera(3840, 2160, 75.0, {0.2 * frame, -0.1 * frame, 0.0});
+        const FrameStats stats = renderer.render(cam, RenderOptions{}, &gpu, nullptr);
+        const ImageError e = compare(gpu, cpu_render(scene, cam, RenderOptions{}));
+        std::cout << "[cuda vs cpu] 4K frame " << frame << ": psnr " << e.psnr << " dB, max " << e.max_abs
+                  << " levels, pairs " << stats.pairs << std::endl;
+        EXPECT_GT(stats.pairs, 0u) << frame;
+        EXPECT_GE(e.psnr, kMinPsnr) << "4K frame " << frame;
+        EXPECT_LE(e.max_abs, kMaxLevels) << "4K frame " << frame;
+    }
+}
+
 TEST_F(CudaRendererTest, BuiltinCityMatchesCpu) {
     CityParams params;
     params.gaussians = 300000;
