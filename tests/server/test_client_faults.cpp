@@ -106,27 +106,44 @@ TEST(ClientFaults, ClientGivesUpAfterItsRetries) {
     EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - begin).count(), 25.0);
 }
 
+/// A load run's JSON report and console output, `flags` after `load --scene city`.
+struct LoadRun {
+    std::string report, output;
+};
+LoadRun run_load(const server::Server& server, const std::string& tag, const std::vector<std::string>& flags) {
+    const fs::path json = fs::path(CATGS_TEST_TMP) / (tag + "-" + std::to_string(getpid()) + ".json");
+    fs::create_directories(json.parent_path());
+    std::vector<std::string> argv = {
+        CATGS_CLIENT_BINARY, "--server", "127.0.0.1:" + std::to_string(server.port()), "load", "--scene", "city"};
+    argv.insert(argv.end(), flags.begin(), flags.end());
+    argv.insert(argv.end(), {"--json-out", json.string()});
+    Child client(argv);
+    const auto code = client.wait(std::chrono::seconds(60));
+    EXPECT_TRUE(code.has_value()) << client.output();
+    EXPECT_EQ(code.value_or(-1), 0) << client.output();
+    std::ifstream file(json);
+    LoadRun run{std::string((std::istreambuf_iterator<char>(file)), std::istreambuf_iterator<char>()), client.output()};
+    fs::remove(json);
+    return run;
+}
+
+/// A number of the report, or -1 (and a failure) where it is missing.
+double report_field(const LoadRun& run, const std::string& name) {
+    std::smatch m;
+    const std::regex pattern("\"" + name + "\": ([-+0-9.eE]+)");
+    EXPECT_TRUE(std::regex_search(run.report, m, pattern)) << name << " missing in\n" << run.report << run.output;
+    return m.empty() ? -1.0 : std::stod(m[1].str());
+}
+
 /// The load client's report counts against the poses' schedule as well as the wall time: the
-/// wall time includes each stream's setup and the run's end, so a server answering every pose
-/// could never show streams x rate frames/s over it. Both must follow from the counts.
+/// wall time includes each stream's setup and its last frame, so a server answering every pose
+/// shows streams x rate frames/s only over the schedule. Both must follow from the counts.
 TEST(ClientFaults, LoadReportCountsFramesAgainstThePosesSchedule) {
     auto server = start_server();
-    const fs::path json = fs::path(CATGS_TEST_TMP) / ("load-report-" + std::to_string(getpid()) + ".json");
-    fs::create_directories(json.parent_path());
-    Child client({CATGS_CLIENT_BINARY, "--server", "127.0.0.1:" + std::to_string(server->port()), "load", "--scene",
-                  "city", "--streams", "2", "--duration", "2", "--rate", "15", "--width", "160", "--height", "90",
-                  "--json-out", json.string()});
-    const auto code = client.wait(std::chrono::seconds(60));
-    ASSERT_TRUE(code.has_value()) << client.output();
-    ASSERT_EQ(*code, 0) << client.output();
-    std::ifstream file(json);
-    const std::string text((std::istreambuf_iterator<char>(file)), std::istreambuf_iterator<char>());
-    const auto field = [&](const std::string& name) {
-        std::smatch m;
-        const std::regex pattern("\"" + name + "\": ([-+0-9.eE]+)");
-        EXPECT_TRUE(std::regex_search(text, m, pattern)) << name << " missing in\n" << text;
-        return m.empty() ? -1.0 : std::stod(m[1].str());
-    };
+    const LoadRun run =
+        run_load(*server, "load-report",
+                 {"--streams", "2", "--duration", "2", "--rate", "15", "--width", "160", "--height", "90"});
+    const auto field = [&](const std::string& name) { return report_field(run, name); };
     const double poses = field("poses_sent"), frames = field("frames"), schedule = field("schedule_s");
     // 2 streams x 2 s x 15 Hz planned; a stream whose opening took long ends a pose or two early.
     EXPECT_GT(poses, 0);
@@ -139,32 +156,21 @@ TEST(ClientFaults, LoadReportCountsFramesAgainstThePosesSchedule) {
     // The last pose leaves one period (1/15 s) before the schedule's end; the wall time holds
     // its frame and the setup.
     EXPECT_GT(field("duration_s"), schedule - 1.0 / 15) << "the wall time includes the last pose's frame";
-    EXPECT_NE(client.output().find("poses served"), std::string::npos) << client.output();
-    fs::remove(json);
+    EXPECT_NE(run.output.find("poses served"), std::string::npos) << run.output;
 }
 
 /// The wall time ends with the last stream. The once-a-second progress line used to sleep past
 /// it, adding up to a second to a 12-second run and taking 8% off its frames/s.
 TEST(ClientFaults, LoadWallTimeEndsWithTheLastStream) {
     auto server = start_server();
-    const fs::path json = fs::path(CATGS_TEST_TMP) / ("load-wall-" + std::to_string(getpid()) + ".json");
-    fs::create_directories(json.parent_path());
     // Two poses a stream, at 0 and 0.25 s: the streams end long before the first progress line.
-    Child client({CATGS_CLIENT_BINARY, "--server", "127.0.0.1:" + std::to_string(server->port()), "load", "--scene",
-                  "city", "--streams", "2", "--duration", "0.5", "--rate", "4", "--width", "64", "--height", "48",
-                  "--json-out", json.string()});
-    const auto code = client.wait(std::chrono::seconds(60));
-    ASSERT_TRUE(code.has_value()) << client.output();
-    ASSERT_EQ(*code, 0) << client.output();
-    std::ifstream file(json);
-    const std::string text((std::istreambuf_iterator<char>(file)), std::istreambuf_iterator<char>());
-    std::smatch m;
-    ASSERT_TRUE(std::regex_search(text, m, std::regex("\"duration_s\": ([-+0-9.eE]+)"))) << text;
-    const double wall = std::stod(m[1].str());
+    const LoadRun run =
+        run_load(*server, "load-wall",
+                 {"--streams", "2", "--duration", "0.5", "--rate", "4", "--width", "64", "--height", "48"});
+    const double wall = report_field(run, "duration_s");
     EXPECT_GT(wall, 0.25) << "the second pose leaves at 0.25 s";
     // The progress line would have held the run until 1 s.
-    EXPECT_LT(wall, 0.9) << text << client.output();
-    fs::remove(json);
+    EXPECT_LT(wall, 0.9) << run.report << run.output;
 }
 
 }  // namespace
