@@ -57,15 +57,16 @@ struct ListTotals {
     unsigned long long live_chunks;  // chunk_cull: the chunks some pose may see (when it ran)
 };
 
-/// Device-side counters, one allocation, read back once per frame. The frame part is reset
-/// every frame; the task part belongs to the task list, which cached frames reuse from their
-/// key frame, so only a key frame's split pass resets it.
 /// ranges' blocks meet here: the last to finish writes the task counters and clears both
 /// again for the next band.
 struct RangesTally {
     unsigned int blocks_done;
     unsigned int nonempty_tiles;  // of the blocks done so far
 };
+
+/// Device-side counters, one allocation, read back once per frame. The frame part is reset
+/// every frame; the task part belongs to the task list, which cached frames reuse from their
+/// key frame, so only a key frame's (or a re-sorting cached frame's) ranges pass resets it.
 struct FrameCounters {
     ListTotals lists;
     unsigned long long visible;         // Gaussians with tiles at the actual pose

@@ -89,7 +89,7 @@ struct HostOutputs {
 /// from 4.3-4.5 to 2.9-3.0 ms (GPU frame 2.02 ms; H100, session 38). Images below
 /// kSpreadCopyBytes are copied by the caller alone: at 1080p (6.2 MB) the spread copy moved the
 /// median by -0.2 to +0.1 ms and raised the mean by up to 0.4 ms on one path (the helpers'
-/// wake-ups), so it starts above 2560x1440 RGB8 (11 MB).
+/// wake-ups), so it starts at 16 MiB: a 4K frame (24.9 MB) is spread, 2560x1440 (11 MB) not.
 inline constexpr int kHostCopyHelpers = 3;
 inline constexpr std::size_t kSpreadCopyBytes = std::size_t{16} << 20;
 
