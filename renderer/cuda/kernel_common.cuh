@@ -94,6 +94,17 @@ struct Counters {
     TaskCounters tasks;
 };
 
+/// A new task list's counters, which split then fills: ranges sets them per band (on the
+/// device, or by an upload under exact culling) beside its own two counts; longest_list and
+/// occlusion_misses span the frame's bands and are cleared when a frame begins.
+__host__ __device__ inline void start_task_list(TaskCounters& c, unsigned int split_k) {
+    c.split_k = split_k;
+    c.extra_tasks = 0;
+    c.split_slots = 0;
+    c.split_tiles = 0;
+    c.heavy_tiles = 0;
+}
+
 /// A CaT-GS label: the tile and split index of an extra task.
 struct TaskLabel {
     std::uint32_t tile, index;

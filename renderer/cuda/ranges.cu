@@ -67,11 +67,7 @@ __global__ void ranges_kernel(std::uint64_t n, const Key* keys, std::uint32_t ti
     if (!last || threadIdx.x != 0) return;
     __threadfence();
     counters->nonempty_tiles = atomicExch(&tally->nonempty_tiles, 0u);
-    counters->split_k = fixed_split_k;
-    counters->extra_tasks = 0;
-    counters->split_slots = 0;
-    counters->split_tiles = 0;
-    counters->heavy_tiles = 0;
+    start_task_list(*counters, fixed_split_k);
     tally->blocks_done = 0;
 }
 
@@ -81,7 +77,7 @@ void clear_ranges(const RangesArgs& a, cudaStream_t s) {
     CATGS_CUDA_CHECK(cudaMemsetAsync(a.range_begin, 0, a.tiles * sizeof(std::uint64_t), s));
     CATGS_CUDA_CHECK(cudaMemsetAsync(a.range_end, 0, a.tiles * sizeof(std::uint64_t), s));
     TaskCounters fresh{};
-    fresh.split_k = a.fixed_split_k;
+    start_task_list(fresh, a.fixed_split_k);
     // All but the last two, longest_list and occlusion_misses: they span the frame's bands
     // (cleared when a frame begins).
     static_assert(offsetof(TaskCounters, occlusion_misses) > offsetof(TaskCounters, longest_list) &&
