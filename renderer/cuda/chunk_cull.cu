@@ -87,13 +87,7 @@ __global__ void __launch_bounds__(kCullThreads)
     stage_views(first_view, host_views, window, views, device_views);
     const std::uint32_t c = blockIdx.x * blockDim.x + threadIdx.x;
     if (c < count) flags[c] = chunk_in_window(chunks[c], views, window, guard, guard_translation) ? 1 : 0;
-    __threadfence();
-    __shared__ bool last;
-    __syncthreads();
-    if (threadIdx.x == 0) last = atomicAdd(ticket, 1u) == gridDim.x - 1;
-    __syncthreads();
-    if (!last) return;
-    __threadfence();
+    if (!last_block_done(ticket)) return;
     compact_flags(flags, count, selected, live_chunks);
 }
 

@@ -105,6 +105,23 @@ __host__ __device__ inline void start_task_list(TaskCounters& c, unsigned int sp
     c.heavy_tiles = 0;
 }
 
+/// Whether this block is the last of the grid to get here (CUDA's threadFenceReduction idiom),
+/// the same answer in all its threads; every thread of every block must call it. `ticket`
+/// counts the blocks that got here: zero at the launch, and the caller's to clear for the
+/// next one. Each thread's earlier stores are fenced before its block takes a ticket, so the
+/// last block sees every block's stores (chunk_cull reads all their flags), and it fences
+/// again before reading them.
+__device__ inline bool last_block_done(unsigned int* ticket) {
+    __shared__ bool last;
+    __threadfence();
+    __syncthreads();
+    if (threadIdx.x == 0) last = atomicAdd(ticket, 1u) == gridDim.x - 1;
+    __syncthreads();
+    const bool mine = last;
+    if (mine) __threadfence();
+    return mine;
+}
+
 /// A CaT-GS label: the tile and split index of an extra task.
 struct TaskLabel {
     std::uint32_t tile, index;

@@ -57,15 +57,8 @@ __global__ void ranges_kernel(std::uint64_t n, const Key* keys, std::uint32_t ti
     using Reduce = cub::BlockReduce<unsigned, kThreads>;
     __shared__ typename Reduce::TempStorage temp;
     const unsigned block_nonempty = Reduce(temp).Sum(nonempty);
-    __shared__ bool last;
-    if (threadIdx.x == 0) {
-        if (block_nonempty > 0) atomicAdd(&tally->nonempty_tiles, block_nonempty);
-        __threadfence();
-        last = atomicAdd(&tally->blocks_done, 1u) == gridDim.x - 1;
-    }
-    __syncthreads();
-    if (!last || threadIdx.x != 0) return;
-    __threadfence();
+    if (threadIdx.x == 0 && block_nonempty > 0) atomicAdd(&tally->nonempty_tiles, block_nonempty);
+    if (!last_block_done(&tally->blocks_done) || threadIdx.x != 0) return;
     counters->nonempty_tiles = atomicExch(&tally->nonempty_tiles, 0u);
     start_task_list(*counters, fixed_split_k);
     tally->blocks_done = 0;
