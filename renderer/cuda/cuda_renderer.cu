@@ -21,7 +21,6 @@
 #include "cuda_check.hpp"
 #include "frame_buffers.hpp"
 #include "keys.cuh"
-#include "merge.cuh"
 #include "preprocess.cuh"
 #include "ranges.cuh"
 #include "rasterize.cuh"
@@ -214,13 +213,12 @@ FrameStats CudaRenderer<T>::Impl::draw(Frame<T>& f, const HostOutputs& out) {
             ranges_and_split(f, pairs);
         }
         rasterize(f, rows, pairs, device);
-        merge(f, pairs, device);
         // Enqueued before the host waits on this band, so that its copies overlap what follows.
         copy_drawn_rows(f, rows.end, out);
         if (last_band) end_copies();
         // The next band marks its stages again, so a band's times are read once it is drawn;
         // the last band's only after copy_out, so that the host takes each band of the image
-        // as its copy ends rather than after the last tile (reading them waits for merge).
+        // as its copy ends rather than after the last tile (reading them waits for rasterize).
         if (!last_band) add_pass_times(f, pass_start);
     }
     copy_out(f, out, device);
@@ -276,7 +274,9 @@ void CudaRenderer<T>::Impl::begin_frame(const Frame<T>& f, const HostOutputs& ou
     t.range_begin.reserve(f.tiles, s);
     t.range_end.reserve(f.tiles, s);
     t.split_slot.reserve(f.tiles, s);
-    t.split_tiles.reserve(f.tiles, s);
+    // Grown empty; afterwards each merge leaves its tile's ticket at zero (merge.cuh).
+    if (t.merge_tickets.reserve(f.tiles, s))
+        CATGS_CUDA_CHECK(cudaMemsetAsync(t.merge_tickets.data(), 0, t.merge_tickets.bytes(), s));
     OcclusionBuffers& o = buffers.occlusion;
     if (f.record_occlusion)
         for (DeviceArray<float>& r : o.recorded) r.reserve(f.tiles, s);  // the last frame's, if any, stay
@@ -507,8 +507,8 @@ void CudaRenderer<T>::Impl::ranges_and_split(Frame<T>& f, std::uint64_t pairs) {
     }
     cuda::split(SplitArgs{static_cast<std::uint32_t>(f.tiles), t.range_begin.data(), t.range_end.data(), f.split_used,
                           max_extra, catgs.split_auto, task_counters(), t.split_slot.data(), t.labels.data(),
-                          t.split_tiles.data(), limits.heavy_list_factor, static_cast<std::uint32_t>(room),
-                          t.heavy_tiles.data(), t.runs_first.data()},
+                          limits.heavy_list_factor, static_cast<std::uint32_t>(room), t.heavy_tiles.data(),
+                          t.runs_first.data()},
                 stream);
     events.record(Event::split, s);
 }
@@ -553,26 +553,14 @@ void CudaRenderer<T>::Impl::rasterize(const Frame<T>& f, TileRows rows, std::uin
         RasterizeArgs<T>{grid, band_tiles + max_extra + max_heavy, raster_layout(), t.range_begin.data(),
                          t.range_end.data(), t.split_slot.data(), t.labels.data(), task_counters(),
                          buffers.pairs.values[buffers.pairs.current].data(), buffers.gaussians.projected.data(), f.view,
-                         f.background, f.tail, buffers.pixels.partials.data(), out,
+                         f.background, f.tail, buffers.pixels.partials.data(), t.merge_tickets.data(), out,
                          f.occlusion ? buffers.occlusion.pyramid.data() : nullptr,
                          f.record_occlusion ? buffers.occlusion.this_frame_records() : nullptr},
         stream);
     events.record(Event::rasterize, stream);
 }
 
-template <typename T>
-void CudaRenderer<T>::Impl::merge(const Frame<T>& f, std::uint64_t pairs, const PixelOutputs& out) {
-    if (f.split_used) {
-        const TileBuffers& t = buffers.tiles;
-        cuda::merge(MergeArgs<T>{std::min<std::uint64_t>(f.tiles, max_extra_tasks(f, pairs)), t.split_tiles.data(),
-                                 t.split_slot.data(), t.range_begin.data(), t.range_end.data(), task_counters(),
-                                 buffers.pixels.partials.data(), f.view, f.background, out},
-                    stream);
-    }
-    events.record(Event::merge, stream);
-}
-
-/// A band's stage times (rasterize, merge and, on a key frame, its lists), once its copies are
+/// A band's stage times (rasterize and, on a key frame, its lists), once its copies are
 /// enqueued (a banded frame marks them again for the next band).
 template <typename T>
 void CudaRenderer<T>::Impl::add_pass_times(const Frame<T>& f, Event pass_start) {
@@ -580,12 +568,12 @@ void CudaRenderer<T>::Impl::add_pass_times(const Frame<T>& f, Event pass_start) 
     if (f.plan.key) add_list_times(pass_start);
 }
 
-/// Waits for the band's merge.
+/// Waits for the band's rasterize. Its split tiles are merged inside it (merge.cuh), so the
+/// CUDA backend reports no time of its own for merge.
 template <typename T>
 void CudaRenderer<T>::Impl::add_raster_times() {
-    events.synchronize(Event::merge);
+    events.synchronize(Event::rasterize);
     events.add(Stage::rasterize, Event::split, Event::rasterize);
-    events.add(Stage::merge, Event::rasterize, Event::merge);
 }
 
 /// The planner learns about a key frame only when its lists cover the whole frame.

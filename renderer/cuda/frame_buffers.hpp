@@ -138,13 +138,13 @@ struct PairBuffers {
 struct TileBuffers {
     DeviceArray<std::uint64_t> range_begin, range_end;  // ranges
     DeviceArray<std::uint32_t> split_slot;              // split: first partial slot of a split tile, or kNoSlot
-    DeviceArray<std::uint32_t> split_tiles;             // split: the tiles merge composites
+    DeviceArray<unsigned int> merge_tickets;            // rasterize: a split tile's sub-tasks done (merge.cuh)
     DeviceArray<TaskLabel> labels;                      // split: the extra sub-tasks
     DeviceArray<std::uint32_t> heavy_tiles;             // split: the lists that run first (runs_first)
     DeviceArray<std::uint8_t> runs_first;               // split: per tile, 1 when listed in heavy_tiles
 
     std::size_t bytes() const {
-        return range_begin.bytes() + range_end.bytes() + split_slot.bytes() + split_tiles.bytes() + labels.bytes() +
+        return range_begin.bytes() + range_end.bytes() + split_slot.bytes() + merge_tickets.bytes() + labels.bytes() +
                heavy_tiles.bytes() + runs_first.bytes();
     }
 };
@@ -153,7 +153,7 @@ struct TileBuffers {
 /// image_float, with its A and stops).
 template <typename T>
 struct PixelBuffers {
-    DeviceArray<Partial<T>> partials;      // rasterize: sub-task (R, A), merged by merge
+    DeviceArray<Partial<T>> partials;      // rasterize: sub-task (R, A), merged by the tile's last (merge.cuh)
     DeviceArray<std::uint8_t> image_rgb8;  // rasterize / merge
     DeviceArray<float> image_float;
     DeviceArray<float> image_transmittance;  // render_partial

@@ -165,7 +165,7 @@ void CudaRenderer<T>::Impl::copy_out(const Frame<T>& f, const HostOutputs& out, 
     CATGS_CUDA_CHECK(cudaStreamSynchronize(stream));
     host_copier.wait();  // the heavy lists' pixels go over what the bands brought
     if (device.heavy_rgb8) take_heavy_pixels(f, *out.rgb8);
-    events.add(Stage::copy_out, Event::merge, Event::copy_out);
+    events.add(Stage::copy_out, Event::rasterize, Event::copy_out);
     if (out.device_partial) {
         DevicePartialImage& d = *out.device_partial;
         CATGS_CUDA_CHECK(cudaGetDevice(&d.device));

@@ -105,21 +105,26 @@ __host__ __device__ inline void start_task_list(TaskCounters& c, unsigned int sp
     c.heavy_tiles = 0;
 }
 
-/// Whether this block is the last of the grid to get here (CUDA's threadFenceReduction idiom),
-/// the same answer in all its threads; every thread of every block must call it. `ticket`
-/// counts the blocks that got here: zero at the launch, and the caller's to clear for the
-/// next one. Each thread's earlier stores are fenced before its block takes a ticket, so the
-/// last block sees every block's stores (chunk_cull reads all their flags), and it fences
-/// again before reading them.
-__device__ inline bool last_block_done(unsigned int* ticket) {
+/// Whether this block is the last of `arrivals` blocks to get here (CUDA's threadFenceReduction
+/// idiom), the same answer in all its threads; every thread of every arriving block must call
+/// it. `ticket` counts the blocks that got here: zero before the first, and the last one's to
+/// clear for the next use. Each thread's earlier stores are fenced before its block takes a
+/// ticket, so the last block sees every block's stores (chunk_cull reads all their flags,
+/// merge all the sub-tasks' partials), and it fences again before reading them.
+__device__ inline bool last_to_arrive(unsigned int* ticket, unsigned int arrivals) {
     __shared__ bool last;
     __threadfence();
     __syncthreads();
-    if (threadIdx.x == 0) last = atomicAdd(ticket, 1u) == gridDim.x - 1;
+    if (threadIdx.x == 0) last = atomicAdd(ticket, 1u) == arrivals - 1;
     __syncthreads();
     const bool mine = last;
     if (mine) __threadfence();
     return mine;
+}
+
+/// last_to_arrive over the whole grid (one-dimensional).
+__device__ inline bool last_block_done(unsigned int* ticket) {
+    return last_to_arrive(ticket, gridDim.x);
 }
 
 /// A CaT-GS label: the tile and split index of an extra task.

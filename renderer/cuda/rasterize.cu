@@ -5,6 +5,7 @@
 #include "catgs/stages/split.hpp"
 #include "catgs/error.hpp"
 #include "cuda_check.hpp"
+#include "merge.cuh"
 
 #include <type_traits>
 
@@ -198,8 +199,8 @@ __global__ void __launch_bounds__(PixelLayout<Pixels>::kThreads, resident_blocks
     rasterize_kernel(TaskGrid grid, const std::uint64_t* range_begin, const std::uint64_t* range_end,
                      const std::uint32_t* split_slot, const TaskLabel* labels, TaskCounters* counters,
                      const std::uint32_t* values, const Projected<T>* projected, View<T> view, Vec3<T> background,
-                     T tail_transmittance, Partial<T>* partials, PixelOutputs out, const float* predicted_cut,
-                     float* recorded_cut) {
+                     T tail_transmittance, Partial<T>* partials, unsigned int* merge_tickets, PixelOutputs out,
+                     const float* predicted_cut, float* recorded_cut) {
     using Layout = PixelLayout<Pixels>;
     constexpr int kThreads = Layout::kThreads, kStaged = kBatch / kThreads;
     constexpr unsigned kAll = 0xffffffffu;
@@ -345,7 +346,15 @@ __global__ void __launch_bounds__(PixelLayout<Pixels>::kThreads, resident_blocks
         for (int w = thread; w < kTilePixels * 3 / 4; w += kThreads) words[w] = heavy_words[w];
         if (thread == 0) out.heavy_tiles[heavy] = tile;
     } else if (slot == kNoSlot) {
-        tile_drawn(out, tile_y);  // a split tile is drawn by merge
+        tile_drawn(out, tile_y);
+    } else {
+        // The tile's last sub-task to finish merges it (merge.cuh).
+        const std::uint32_t parts = split_count(range_end[tile] - range_begin[tile], counters->split_k) + 1;
+        if (last_to_arrive(&merge_tickets[tile], parts)) {  // uniform across the block
+            merge_split_tile<T, kThreads>(tile, slot, parts, partials, view, background, out);
+            if (thread == 0) merge_tickets[tile] = 0;
+            tile_drawn(out, tile_y);
+        }
     }
 }
 
@@ -354,7 +363,7 @@ void launch_rasterize(const RasterizeArgs<T>& a, cudaStream_t s) {
     const auto launch = [&](auto kernel) {
         kernel<<<static_cast<unsigned>(a.blocks), PixelLayout<Pixels>::kThreads, 0, s>>>(
             a.grid, a.range_begin, a.range_end, a.split_slot, a.labels, a.counters, a.values, a.projected, a.view,
-            a.background, a.tail_transmittance, a.partials, a.out, a.predicted_cut, a.recorded_cut);
+            a.background, a.tail_transmittance, a.partials, a.merge_tickets, a.out, a.predicted_cut, a.recorded_cut);
     };
     const bool stop_at_min = a.tail_transmittance == static_cast<T>(kMinTransmittance);
     if constexpr (std::is_same_v<T, float>) {

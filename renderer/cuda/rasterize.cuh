@@ -1,7 +1,8 @@
 // rasterize: one block per task (a 16x16 tile or a sub-task of a split tile), of 256 threads
 // of one pixel each or 128 of two (RasterLayout), the Gaussians staged through shared memory a
 // batch at a time and blended front to back per pixel (stages/blend.hpp). Tiles that are not
-// split write their pixels; sub-tasks write partial (R, A) for merge.
+// split write their pixels; sub-tasks write partial (R, A), and the last of a tile's sub-tasks
+// to finish merges them (merge.cuh).
 #pragma once
 
 #include <cuda_runtime_api.h>
@@ -48,6 +49,9 @@ struct RasterizeArgs {
     Vec3<T> background;
     T tail_transmittance;  // where a split tile's later sub-tasks stop
     Partial<T>* partials;
+    /// Per tile: how many of a split tile's sub-tasks have finished (merge.cuh); zero between
+    /// frames (the merging block clears its tile's).
+    unsigned int* merge_tickets;
     PixelOutputs out;
     /// The occlusion cut (stages/occlusion.hpp): this frame's predicted cut a tile, which each
     /// tile checks its stop against (misses counted in counters), or null; and where each tile

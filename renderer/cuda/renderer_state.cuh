@@ -165,7 +165,6 @@ struct CudaRenderer<T>::Impl {
     /// Sets f.split_used and f.heavy_used.
     void ranges_and_split(Frame<T>& f, std::uint64_t pairs);
     void rasterize(const Frame<T>& f, TileRows rows, std::uint64_t pairs, const PixelOutputs& out);
-    void merge(const Frame<T>& f, std::uint64_t pairs, const PixelOutputs& out);
     void add_pass_times(const Frame<T>& f, Event pass_start);
     void add_raster_times();
     void copy_drawn_rows(const Frame<T>& f, int rows_end, const HostOutputs& out);

@@ -28,8 +28,9 @@ __device__ void list_if_heavy(const SplitArgs& a, std::uint32_t t, std::uint64_t
 
 // CaT-GS Algorithm 1: a tile longer than k keeps its remainder-sized first
 // sub-task as task `tile`; its split_num extra sub-tasks are appended through the atomic
-// task counter with (tile, split index) labels. Split tiles get split_num + 1 partial slots
-// and a place in the merge list. Unsplit tiles may be listed as heavy (list_if_heavy).
+// task counter with (tile, split index) labels. Split tiles get split_num + 1 partial slots,
+// which the last of their sub-tasks to finish merges (merge.cuh). Unsplit tiles may be listed
+// as heavy (list_if_heavy).
 __global__ void split_kernel(SplitArgs a) {
     const std::uint32_t t = blockIdx.x * blockDim.x + threadIdx.x;
     if (t >= a.tiles) return;
@@ -44,7 +45,7 @@ __global__ void split_kernel(SplitArgs a) {
     if (a.heavy_room > 0) a.runs_first[t] = 0;
     const std::uint32_t first_extra = atomicAdd(&counters->extra_tasks, splits);
     a.split_slot[t] = atomicAdd(&counters->split_slots, splits + 1);
-    a.split_tiles[atomicAdd(&counters->split_tiles, 1u)] = t;
+    atomicAdd(&counters->split_tiles, 1u);
     for (std::uint32_t i = 1; i <= splits; ++i)
         if (first_extra + i - 1 < a.max_extra) a.labels[first_extra + i - 1] = TaskLabel{t, i};
 }

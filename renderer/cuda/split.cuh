@@ -21,7 +21,6 @@ struct SplitArgs {
     TaskCounters* counters;
     std::uint32_t* split_slot;
     TaskLabel* labels;
-    std::uint32_t* split_tiles;
     /// The heavy lists: room for heavy_room tiles (0: none listed, runs_first not written) and
     /// every tile's flag.
     double heavy_factor;

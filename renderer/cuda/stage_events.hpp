@@ -13,7 +13,7 @@
 
 namespace catgs::cuda {
 
-/// The marks of one frame on the stream. A banded frame marks band_count..merge once per band,
+/// The marks of one frame on the stream. A banded frame marks band_count..rasterize once per band,
 /// and each band's are read once it is drawn; rasterize runs from `split`, with no host wait
 /// between them.
 enum class Event : int {
@@ -28,11 +28,10 @@ enum class Event : int {
     sort,
     ranges,
     split,
-    rasterize,
-    merge,
-    copy_out,  // the copy stream's last copy, seen from the renderer's stream
+    rasterize,  // merge too: split tiles are merged inside rasterize (merge.cuh)
+    copy_out,   // the copy stream's last copy, seen from the renderer's stream
 };
-inline constexpr std::size_t kEventCount = 14;
+inline constexpr std::size_t kEventCount = 13;
 
 class StageEvents {
 public:
