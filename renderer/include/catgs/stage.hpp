@@ -18,7 +18,8 @@ enum class Stage : int {
     ranges,      ///< each tile's [begin, end) in the sorted pairs
     split,       ///< the task list: CaT-GS Algorithm 1 cuts lists longer than k (stages/split.hpp)
     rasterize,   ///< each task blends its Gaussians front to back per pixel (stages/blend.hpp)
-    merge,       ///< split tiles: partial colour and transmittance composited front to back
+    merge,       ///< split tiles: partial colour and transmittance composited front to back (on the
+                 ///< GPU inside rasterize, by each split tile's last sub-task: no time of its own)
     copy_out,    ///< the image to host memory (GPU backend)
     encode,      ///< the image to JPEG, PNG or raw bytes (server)
 };
