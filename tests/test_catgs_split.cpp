@@ -220,7 +220,7 @@ TEST(SplitChooser, TakesTheSideWithTheLowerMeasuredRasterizeCostAndProbesTheOthe
 }
 
 // What splitting costs in copy_out counts against it: split frames that draw as fast as whole
-// ones but leave their copy waiting for merge lose.
+// ones but leave more of their copy exposed lose.
 TEST(SplitChooser, ExposedCopyTimeCountsAgainstTheSideThatCausesIt) {
     const CatgsOptions o = timed_split_options();
     SplitChooser chooser;

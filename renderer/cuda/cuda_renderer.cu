@@ -1,6 +1,6 @@
 // CudaRenderer: the frame's passes in order, over the stage launchers (one file per stage:
-// chunk_cull.cu, preprocess.cu, scan.cu, keys.cu, sort.cu, ranges.cu, split.cu, rasterize.cu,
-// merge.cu, copy_out.cu), the frame's buffers (frame_buffers.hpp) and the stage events
+// chunk_cull.cu, preprocess.cu, scan.cu, keys.cu, sort.cu, ranges.cu, split.cu, rasterize.cu
+// with merge.cuh, copy_out.cu), the frame's buffers (frame_buffers.hpp) and the stage events
 // (stage_events.hpp).
 #include "cuda_renderer.hpp"
 

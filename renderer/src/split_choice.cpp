@@ -29,8 +29,9 @@ void SplitChooser::learn(bool split, const FrameStats& stats) {
     // shorter lists (the pairs it left out lay behind every pixel's stop) in about the same time.
     const std::uint64_t pairs = stats.pairs + stats.occluded_pairs;
     if (!measured_ || pairs == 0) return;
-    // copy_out too: the bands of tile rows it copies while the frame is drawn wait for merge
-    // wherever a tile of theirs was split, so splitting also shows as exposed copy time.
+    // copy_out too: whatever of the copy a frame's split tiles leave exposed counts against
+    // splitting. (While merge ran after rasterize on the GPU, every band holding a split tile
+    // waited for it; the CPU backend has no copy.)
     const double ms = stats.stage_ms[Stage::rasterize] + stats.stage_ms[Stage::merge] + stats.stage_ms[Stage::copy_out];
     if (!(ms > 0)) return;
     (split ? split_ : whole_)
