@@ -348,7 +348,9 @@ __global__ void __launch_bounds__(PixelLayout<Pixels>::kThreads, resident_blocks
     } else if (slot == kNoSlot) {
         tile_drawn(out, tile_y);
     } else {
-        // The tile's last sub-task to finish merges it (merge.cuh).
+        // The tile's last sub-task to finish merges it (merge.cuh). Its sub-task count is read
+        // again here rather than kept from subtask_range, so no register holds it through the
+        // blend loop (as heavy_to_host).
         const std::uint32_t parts = split_count(range_end[tile] - range_begin[tile], counters->split_k) + 1;
         if (last_to_arrive(&merge_tickets[tile], parts)) {  // uniform across the block
             merge_split_tile<T, kThreads>(tile, slot, parts, partials, view, background, out);
