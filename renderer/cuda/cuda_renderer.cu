@@ -193,6 +193,7 @@ FrameStats CudaRenderer<T>::Impl::draw(Frame<T>& f, const HostOutputs& out) {
             ranges_and_split(f, f.total);
             cached_split = f.split_used;
             cached_heavy = f.heavy_used;
+            cached_k_min = f.k_min;
         } else {
             // The key frame's lists and order as they are; the marks keep the stage times at 0.
             for (Event e : {Event::depth_order, Event::scan, Event::keys, Event::sort, Event::ranges, Event::split})
@@ -200,6 +201,7 @@ FrameStats CudaRenderer<T>::Impl::draw(Frame<T>& f, const HostOutputs& out) {
         }
         f.split_used = cached_split;
         f.heavy_used = cached_heavy;
+        f.k_min = cached_k_min;
     }
     const PixelOutputs device = device_outputs(f, out);
     const Event pass_start = f.bands.size() > 1 ? Event::band_scan : Event::scan;
@@ -581,6 +583,7 @@ template <typename T>
 void CudaRenderer<T>::Impl::key_rendered(const Frame<T>& f, const FrameCounters& c) {
     cached_pairs = f.total;
     cached_split = f.split_used;
+    cached_k_min = f.k_min;
     if (f.cache == CacheMode::off || f.bands.size() > 1) {
         planner.invalidate();
         return;

@@ -105,7 +105,12 @@ struct CudaRenderer<T>::Impl {
     std::uint64_t cached_pairs = 0;  // pairs of the cached lists
     bool cached_split = false;       // the cached task list has split tiles
     bool cached_heavy = false;       // and its heavy lists
-    ChunkSpace key_space{};          // the key frame's compacted index space (cached frames reuse it)
+    /// The k bound its extra sub-tasks were counted with (Frame::k_min): a cached frame's own
+    /// plan does not choose k (SplitChooser), and the key frame's may have moved along the
+    /// ladder, so rasterize must launch the extra tasks of the list's k, or split tiles whose
+    /// sub-tasks never run are never merged (and their copy band never completes).
+    std::uint64_t cached_k_min = 1;
+    ChunkSpace key_space{};  // the key frame's compacted index space (cached frames reuse it)
     std::uint64_t key_chunks_culled = 0;
     FrameBuffers<T> buffers;
     HostStaging<T> host;

@@ -67,6 +67,42 @@ TEST_F(CudaCatgsTest, SplittingMatchesTheUnsplitReference) {
     EXPECT_LE(compare(g, to_rgb8(c)).max_abs, 2);
 }
 
+// A cached frame draws its key frame's task list whatever k its own plan names: the key frame
+// may have split at another k (SplitChooser moves k along its ladder per path), and rasterize
+// must launch every extra sub-task of that list, or a split tile is never merged and its copy
+// band never completes (session 40: the kit's garden hung at the first cached frame after a
+// key frame split at k / 2). Here the options' k changes between the two frames.
+TEST_F(CudaCatgsTest, CachedFramesDrawTheKeyFramesSplitWhateverTheirOwnK) {
+    test::RandomSceneParams p;
+    p.count = 40000;
+    p.extent = 2.0;  // dense: long lists
+    const Scene scene = test::random_scene(test::fresh_seed("cached split k"), p);
+    Camera cam = test::forward_camera(257, 143, 60.0);
+    const ImageRGB8 reference = cpu_full(scene, cam);
+    cuda::CudaRenderer<float> gpu;
+    gpu.set_scene(std::make_shared<cuda::DeviceScene>(scene, gpu.stream()));
+    RenderOptions o;
+    o.catgs.cache = CacheMode::speculative;
+    o.catgs.adaptive_window = false;
+    o.catgs.window = 4;
+    o.catgs.resort_cached = false;  // the same pose: the key frame's order and task list as they are
+    o.catgs.split_k = 7;
+    ImageRGB8 image;
+    const FrameStats key = gpu.render(cam, o, &image, nullptr);
+    ASSERT_TRUE(key.key_frame);
+    ASSERT_GT(key.split_tasks, 0u);
+    o.catgs.split_k = 4096;  // fewer extra tasks than the key frame's list holds
+    for (int i = 1; i < 3; ++i) {
+        cam.timestamp = i / 30.0;
+        const FrameStats cached = gpu.render(cam, o, &image, nullptr);
+        EXPECT_FALSE(cached.key_frame) << "frame " << i;
+        EXPECT_EQ(cached.split_k, 7u) << "frame " << i;
+        const ImageError e = compare(image, reference);
+        EXPECT_LE(e.max_abs, 2) << "frame " << i;
+        EXPECT_GE(e.psnr, 50.0) << "frame " << i;
+    }
+}
+
 /// The built-in city at 200000 Gaussians: tile lists long enough to split.
 Scene gpu_city(const std::string& what) {
     CityParams params;
