@@ -317,5 +317,146 @@ TEST(SplitChooser, AFrameKeptWholeByThePlannerHasNoSubtasks) {
     EXPECT_TRUE(renderer.planner().split_chooser().whole_cost().known());
 }
 
+// --- The ladder of k (SplitChooser: which k, while splitting pays) -------------------------
+
+/// Runs `frames` list-building frames where splitting at k costs cost(k) and a whole frame
+/// `whole_ms` per million pairs; returns the k of each frame (0: whole).
+template <typename Cost>
+std::vector<std::uint32_t> ladder_frames(SplitChooser& chooser, const CatgsOptions& o, int frames, Cost cost,
+                                         double whole_ms) {
+    std::vector<std::uint32_t> ks;
+    for (int i = 0; i < frames; ++i) {
+        const bool s = chooser.choose(o);
+        const std::uint32_t k = s ? chooser.k() : 0;
+        ks.push_back(k);
+        chooser.learn(s, measured(s ? cost(k) : whole_ms, 0, 1000000));
+    }
+    return ks;
+}
+
+/// Cheapest at `best`, dearer by `per_step` for each doubling or halving away from it.
+auto valley(std::uint32_t best, double per_step) {
+    return [best, per_step](std::uint32_t k) { return 1.0 + per_step * std::fabs(std::log2(double(k) / best)); };
+}
+
+// From the options' k the chooser walks, one probed rung at a time, to the cheapest rung, down
+// or up, never past the ladder's ends (k/8 .. 4k), and then spends all but its probes there.
+TEST(SplitLadder, WalksToTheCheapestKWithinTheLadder) {
+    const CatgsOptions o = timed_split_options();  // k = 8192
+    for (const std::uint32_t best : {1024u, 2048u, 8192u, 32768u}) {
+        SplitChooser chooser;
+        const std::vector<std::uint32_t> ks =
+            ladder_frames(chooser, o, 40 * kSplitRungProbeEvery, valley(best, 0.03), 3.0);
+        EXPECT_EQ(chooser.chosen_k(), best);
+        int at_best = 0, late = 0;
+        for (std::size_t i = 0; i < ks.size(); ++i) {
+            if (ks[i] == 0) continue;  // whole probes
+            EXPECT_GE(ks[i], o.split_k >> kSplitLadderBelow) << "frame " << i;
+            EXPECT_LE(ks[i], o.split_k << kSplitLadderAbove) << "frame " << i;
+            if (i >= ks.size() / 2) {
+                ++late;
+                at_best += ks[i] == best;
+            }
+        }
+        // The second half: one rung probe in kSplitRungProbeEvery split frames at most.
+        EXPECT_GE(at_best, late - late / kSplitRungProbeEvery - 1) << "best " << best;
+    }
+}
+
+// A rung clearly dearer than the chosen one is tried once, then only every
+// kSplitClearProbeEvery decisions; a close one every other rung probe.
+TEST(SplitLadder, ClearlyDearerRungsAreProbedSeldom) {
+    const CatgsOptions o = timed_split_options();
+    const int frames = 20 * kSplitClearProbeEvery;
+    const auto off_rung = [&](double neighbour_cost) {
+        SplitChooser chooser;
+        const auto cost = [&](std::uint32_t k) { return k == o.split_k ? 1.0 : neighbour_cost; };
+        int off = 0;
+        for (std::uint32_t k : ladder_frames(chooser, o, frames, cost, 3.0)) off += k != 0 && k != o.split_k;
+        EXPECT_EQ(chooser.chosen_k(), o.split_k);
+        return off;
+    };
+    const int dear = off_rung(1.5), close = off_rung(1.0 + 0.5 * (kSplitRungClearMargin - 1.0));
+    EXPECT_GE(dear, 2 * (frames / kSplitClearProbeEvery - 2));
+    EXPECT_LE(dear, 2 * (frames / kSplitClearProbeEvery + 1));
+    EXPECT_GE(close, frames / kSplitRungProbeEvery - 2);
+    EXPECT_LE(close, frames / kSplitRungProbeEvery + 1);
+}
+
+// No ladder where whole frames are cheaper (only the chosen rung is probed, as before), with
+// split_auto (the frame derives k: k() is 0), or without timings (the options' k).
+TEST(SplitLadder, StaysOffTheLadderWhereItCannotPay) {
+    const CatgsOptions o = timed_split_options();
+    SplitChooser whole_wins;
+    for (std::uint32_t k : ladder_frames(whole_wins, o, 8 * kSplitClearProbeEvery, valley(1024, 0.03), 0.5))
+        EXPECT_TRUE(k == 0 || k == o.split_k) << k;
+
+    CatgsOptions automatic = o;
+    automatic.split_k = 0;
+    automatic.split_auto = true;
+    SplitChooser auto_k;
+    for (std::uint32_t k : ladder_frames(auto_k, automatic, 4 * kSplitClearProbeEvery, valley(1024, 0.03), 3.0))
+        EXPECT_EQ(k, 0u);
+
+    CatgsOptions work = o;
+    work.window_cost = WindowCost::work;
+    SplitChooser fixed;
+    for (std::uint32_t k : ladder_frames(fixed, work, 4 * kSplitRungProbeEvery, valley(1024, 0.03), 3.0))
+        EXPECT_EQ(k, o.split_k);
+}
+
+// New options (another k, or auto) start a new ladder from their own k.
+TEST(SplitLadder, NewOptionsStartANewLadder) {
+    CatgsOptions o = timed_split_options();
+    SplitChooser chooser;
+    ladder_frames(chooser, o, 40 * kSplitRungProbeEvery, valley(1024, 0.03), 3.0);
+    ASSERT_EQ(chooser.chosen_k(), 1024u);
+    o.split_k = 100;
+    EXPECT_TRUE(chooser.choose(o));
+    EXPECT_EQ(chooser.k(), 100u);
+    EXPECT_FALSE(chooser.split_cost().known());
+}
+
+// What a plan hands the backends: no splitting unless it splits, else its k (or the options'
+// when it has none); split_auto keeps deriving k.
+TEST(SplitLadder, PlanSplitOptionsCarryThePlansK) {
+    CatgsOptions o = timed_split_options();
+    FramePlanner::Plan plan;
+    plan.split = false;
+    plan.split_k = 2048;
+    CatgsOptions s = plan.split_options(o);
+    EXPECT_EQ(s.split_k, 0u);
+    EXPECT_FALSE(s.split_auto);
+    plan.split = true;
+    EXPECT_EQ(plan.split_options(o).split_k, 2048u);
+    plan.split_k = 0;
+    EXPECT_EQ(plan.split_options(o).split_k, 8192u);
+    o.split_k = 0;
+    o.split_auto = true;
+    plan.split_k = 2048;
+    s = plan.split_options(o);
+    EXPECT_TRUE(s.split_auto);
+    EXPECT_EQ(s.split_k, 0u);
+}
+
+// On the CPU backend, through the planner: every frame that splits reports the k its plan
+// chose, a rung of the ladder around the options' k.
+TEST(SplitLadder, FramesReportThePlansK) {
+    const Scene scene = dense_scene("split ladder frames");
+    const Camera cam = test::forward_camera(96, 64, 60.0);
+    RenderOptions ro;
+    ro.catgs.split_k = 32;
+    ro.catgs.window_cost = WindowCost::time;
+    CpuRenderer<float> renderer(1);
+    ImageF image;
+    for (int i = 0; i < 3 * kSplitRungProbeEvery; ++i) {
+        const FrameStats stats = renderer.render(scene, cam, ro, image);
+        if (stats.split_k == 0) continue;
+        EXPECT_EQ(stats.split_k, renderer.planner().split_chooser().k()) << "frame " << i;
+        EXPECT_GE(stats.split_k, ro.catgs.split_k >> kSplitLadderBelow);
+        EXPECT_LE(stats.split_k, ro.catgs.split_k << kSplitLadderAbove);
+    }
+}
+
 }  // namespace
 }  // namespace catgs

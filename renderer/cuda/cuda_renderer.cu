@@ -247,13 +247,16 @@ Frame<T> CudaRenderer<T>::Impl::plan_frame(const Camera& camera, const RenderOpt
     f.tile_bits = sort_key_tile_bits(f.tiles);
     f.tile_width = tile_key_width(f.tiles);
     f.shared_list = options.culling == Culling::exact;
-    f.splitting = (catgs.split_auto || catgs.split_k > 0) && f.plan.split;
+    const CatgsOptions split = f.plan.split_options(catgs);
+    f.splitting = split.split_auto || split.split_k > 0;
+    f.split_auto = split.split_auto;
+    f.fixed_split_k = split.split_auto ? 0 : split.split_k;
     f.speculative = f.cache == CacheMode::speculative;
     f.near = f.plan.window_near_plane(catgs, options.near_plane);
     f.reproject_actual = f.near != options.near_plane;
     f.guard = f.speculative ? static_cast<T>(catgs.guard_px) : T(0);
     f.guard_translation = f.speculative ? static_cast<T>(catgs.guard_translation) : T(0);
-    f.k_min = catgs.split_auto ? kAutoSplitFloor : std::max<std::uint32_t>(catgs.split_k, 1);
+    f.k_min = split.split_auto ? kAutoSplitFloor : std::max<std::uint32_t>(split.split_k, 1);
     f.background = Vec3<T>{static_cast<T>(options.background[0]), static_cast<T>(options.background[1]),
                            static_cast<T>(options.background[2])};
     f.tail = static_cast<T>(catgs.split_tail_transmittance);
@@ -486,11 +489,10 @@ void CudaRenderer<T>::Impl::sort(const Frame<T>& f, std::uint64_t pairs) {
 template <typename T>
 void CudaRenderer<T>::Impl::ranges_and_split(Frame<T>& f, std::uint64_t pairs) {
     const cudaStream_t s = stream;
-    const CatgsOptions& catgs = f.options->catgs;
     TileBuffers& t = buffers.tiles;
     cuda::ranges(RangesArgs{pairs, buffers.pairs.sorted_tiles(), static_cast<std::uint32_t>(f.tiles), f.shared_list,
-                            catgs.split_auto ? 0 : catgs.split_k, t.range_begin.data(), t.range_end.data(),
-                            task_counters(), &frame_counters()->ranges},
+                            f.fixed_split_k, t.range_begin.data(), t.range_end.data(), task_counters(),
+                            &frame_counters()->ranges},
                  s);
     events.record(Event::ranges, s);
     // Exact culling shares one list, which this task layout neither splits nor reorders.
@@ -508,7 +510,7 @@ void CudaRenderer<T>::Impl::ranges_and_split(Frame<T>& f, std::uint64_t pairs) {
         t.runs_first.reserve(f.tiles, s);
     }
     cuda::split(SplitArgs{static_cast<std::uint32_t>(f.tiles), t.range_begin.data(), t.range_end.data(), f.split_used,
-                          max_extra, catgs.split_auto, task_counters(), t.split_slot.data(), t.labels.data(),
+                          max_extra, f.split_auto, task_counters(), t.split_slot.data(), t.labels.data(),
                           limits.heavy_list_factor, static_cast<std::uint32_t>(room), t.heavy_tiles.data(),
                           t.runs_first.data()},
                 stream);

@@ -40,6 +40,8 @@ struct Frame {
     TileKeyWidth tile_width = TileKeyWidth::bits32;
     bool shared_list = false;  // exact culling: one list serves every tile
     bool splitting = false;
+    bool split_auto = false;          // k from the frame's lists (splitting only)
+    std::uint32_t fixed_split_k = 0;  // the plan's k (FramePlanner::Plan::split_options); 0: auto or none
     bool speculative = false;
     /// The window's near plane (FramePlanner::Plan::window_near_plane); when lowered, the actual
     /// pose is projected again with the real one.

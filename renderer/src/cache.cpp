@@ -137,6 +137,7 @@ FramePlanner::Plan FramePlanner::next(const Camera& actual, const CatgsOptions& 
     }
     if (plan.key || plan.resort) {
         plan.split = split_.choose(options);
+        plan.split_k = plan.split ? split_.k() : 0;
         plan.split_exploring = split_.exploring();
     }
     return plan;
@@ -299,6 +300,17 @@ void FramePlanner::reset() {
     window_ = 1;
     window_resorted_ = false;
     emission_order_kept_ = false;
+}
+
+CatgsOptions FramePlanner::Plan::split_options(const CatgsOptions& options) const {
+    CatgsOptions o = options;
+    if (!split) {
+        o.split_k = 0;
+        o.split_auto = false;
+    } else if (!o.split_auto && split_k > 0) {
+        o.split_k = split_k;
+    }
+    return o;
 }
 
 double FramePlanner::Plan::window_near_plane(const CatgsOptions& options, double near_plane) const {

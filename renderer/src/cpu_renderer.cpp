@@ -142,7 +142,7 @@ bool CpuRenderer<T>::draw(const Scene& scene, const View<T>& view, const Window&
                 preprocess(scene, view, window, options.culling);
             }
             stats.stage_ms[Stage::preprocess] += elapsed_ms(t);
-            render_bands(scene, view, window, options, plan.split, out, stats);
+            render_bands(scene, view, window, options, plan.split_options(options.catgs), out, stats);
             return true;
         }
         stats.stage_ms[Stage::preprocess] += elapsed_ms(t);
@@ -158,7 +158,7 @@ bool CpuRenderer<T>::draw(const Scene& scene, const View<T>& view, const Window&
             emitted_values_.clear();
         }
         stats.stage_ms[Stage::keys] += elapsed_ms(t);
-        sort_and_schedule(view, options, plan.split, stats);
+        sort_and_schedule(view, options, plan.split_options(options.catgs), stats);
     } else {
         reproject(scene, view);
         stats.stage_ms[Stage::preprocess] += elapsed_ms(t);
@@ -166,7 +166,7 @@ bool CpuRenderer<T>::draw(const Scene& scene, const View<T>& view, const Window&
             t = Clock::now();
             rekey(view, options.culling);
             stats.stage_ms[Stage::keys] += elapsed_ms(t);
-            sort_and_schedule(view, options, plan.split, stats);
+            sort_and_schedule(view, options, plan.split_options(options.catgs), stats);
         }
     }
     draw_tasks(view, options, out, stats);
@@ -192,8 +192,8 @@ void CpuRenderer<T>::draw_tasks(const View<T>& view, const RenderOptions& option
 // Sort, tile ranges and the task list, timed: what key frames and re-sorting cached frames
 // run after their keys are in place.
 template <typename T>
-void CpuRenderer<T>::sort_and_schedule(const View<T>& view, const RenderOptions& options, bool may_split,
-                                       FrameStats& stats) {
+void CpuRenderer<T>::sort_and_schedule(const View<T>& view, const RenderOptions& options,
+                                       const CatgsOptions& split_options, FrameStats& stats) {
     // Accumulated: a banded frame runs these once per band.
     auto t = Clock::now();
     sort(view);
@@ -202,11 +202,8 @@ void CpuRenderer<T>::sort_and_schedule(const View<T>& view, const RenderOptions&
     ranges(view, options.culling);
     stats.stage_ms[Stage::ranges] += elapsed_ms(t);
     t = Clock::now();
-    CatgsOptions split_options = options.catgs;
-    if (!may_split) {  // the planner measured that splitting does not pay here (SplitChooser)
-        split_options.split_k = 0;
-        split_options.split_auto = false;
-    }
+    // The plan's (FramePlanner::Plan::split_options): no split where the planner measured that
+    // splitting does not pay here, and the k it measured cheapest (SplitChooser).
     split_k_ = split(split_options);
     stats.stage_ms[Stage::split] += elapsed_ms(t);
 }

@@ -98,8 +98,8 @@ std::vector<TileRows> CpuRenderer<T>::plan_bands(const Scene& scene, const Windo
 
 template <typename T>
 void CpuRenderer<T>::render_bands(const Scene& scene, const View<T>& view, const Window& window,
-                                  const RenderOptions& options, bool may_split, const FrameOutput& out,
-                                  FrameStats& stats) {
+                                  const RenderOptions& options, const CatgsOptions& split_options,
+                                  const FrameOutput& out, FrameStats& stats) {
     auto t = Clock::now();
     const std::vector<TileRows> bands = plan_bands(scene, window, options.culling);
     stats.stage_ms[Stage::keys] += elapsed_ms(t);  // the CPU backend folds scan into keys
@@ -111,7 +111,7 @@ void CpuRenderer<T>::render_bands(const Scene& scene, const View<T>& view, const
         t = Clock::now();
         keys(scene, window, options.culling);
         stats.stage_ms[Stage::keys] += elapsed_ms(t);
-        sort_and_schedule(view, options, may_split, stats);
+        sort_and_schedule(view, options, split_options, stats);
         draw_tasks(view, options, out, stats);
         pairs += rendered_pairs_;
         split_tasks += split_tasks_;
@@ -134,7 +134,7 @@ void CpuRenderer<T>::render_bands(const Scene& scene, const View<T>& view, const
     template bool CpuRenderer<T>::needs_bands(Culling) const;                                                     \
     template std::vector<TileRows> CpuRenderer<T>::plan_bands(const Scene&, const Window&, Culling) const;        \
     template void CpuRenderer<T>::render_bands(const Scene&, const View<T>&, const Window&, const RenderOptions&, \
-                                               bool, const FrameOutput&, FrameStats&);
+                                               const CatgsOptions&, const FrameOutput&, FrameStats&);
 CATGS_CPU_BAND_MEMBERS(float)
 CATGS_CPU_BAND_MEMBERS(double)
 #undef CATGS_CPU_BAND_MEMBERS

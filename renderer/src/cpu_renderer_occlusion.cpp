@@ -20,7 +20,8 @@ void CpuRenderer<T>::plan_occlusion(const Camera& camera, const View<T>& view, c
     const CatgsOptions& catgs = options.catgs;
     record_occlusion_ =
         std::is_same_v<T, float> && catgs.occlusion_cut && options.culling != Culling::exact && out.image != nullptr;
-    const bool splitting = plan.split && (catgs.split_k > 0 || catgs.split_auto);
+    const CatgsOptions split = plan.split_options(catgs);
+    const bool splitting = split.split_k > 0 || split.split_auto;
     const bool eligible =
         record_occlusion_ && plan.key && plan.cache(catgs) == CacheMode::off && plan.poses.size() == 1 && !splitting;
     const std::optional<OcclusionMotion> motion = occlusion_.plan(camera, eligible);

@@ -71,7 +71,8 @@ void add_pipeline_flags(CLI::App& app, PipelineFlags& f) {
     app.add_option(
            "--split", f.split,
            "tile task splitting: off, auto, or k (lists longer than k are split; with --window-cost time, only on "
-           "paths where splitting measures faster)")
+           "paths where splitting measures faster, and k moves by powers of two within k/8..4k to the one that "
+           "measures fastest)")
         ->capture_default_str();
     app.add_option("--split-tail", f.split_tail,
                    "early-termination transmittance of split sub-tasks after the first (1e-4: the unsplit "

@@ -158,12 +158,18 @@ public:
         /// split its long tiles: off where the measured rasterize time says splitting does not
         /// pay on this path (SplitChooser), or where the options split nothing.
         bool split = true;
+        /// The k a split frame of this plan uses (SplitChooser::k): the options' k, or the rung
+        /// of the ladder the chooser measured cheapest on this path. 0: the options' k.
+        std::uint32_t split_k = 0;
         /// The split choice explores (SplitChooser::exploring): the window cost model does not
         /// learn this frame's cost. At 4K the first frame splits and costs a third more than
         /// the frames after it; learned as plain's cost, it kept the kit's garden low path on
         /// windows that lost 18% for its first 66 frames (H200, session 9).
         bool split_exploring = false;
 
+        /// The splitting options this frame renders with: `options` without splitting unless
+        /// `split`, else with this plan's k (split_auto keeps deriving k from the lists).
+        CatgsOptions split_options(const CatgsOptions& options) const;
         /// The cache mode this frame renders with.
         CacheMode cache(const CatgsOptions& options) const { return plain ? CacheMode::off : options.cache; }
         /// The near plane the frame's poses are projected with: a speculative window lowers

@@ -113,7 +113,9 @@ private:
     void sort(const View<T>& view);
     void ranges(const View<T>& view, Culling culling);
     std::uint32_t split(const CatgsOptions& options);
-    void sort_and_schedule(const View<T>& view, const RenderOptions& options, bool may_split, FrameStats& stats);
+    /// `split_options`: the plan's (FramePlanner::Plan::split_options).
+    void sort_and_schedule(const View<T>& view, const RenderOptions& options, const CatgsOptions& split_options,
+                           FrameStats& stats);
     void rasterize(const View<T>& view, const RenderOptions& options, const FrameOutput& out);
     void merge(const View<T>& view, const RenderOptions& options, const FrameOutput& out);
     void draw_tasks(const View<T>& view, const RenderOptions& options, const FrameOutput& out, FrameStats& stats);
@@ -124,7 +126,7 @@ private:
     bool needs_bands(Culling culling) const;
     std::vector<TileRows> plan_bands(const Scene& scene, const Window& window, Culling culling) const;
     void render_bands(const Scene& scene, const View<T>& view, const Window& window, const RenderOptions& options,
-                      bool may_split, const FrameOutput& out, FrameStats& stats);
+                      const CatgsOptions& split_options, const FrameOutput& out, FrameStats& stats);
     bool banded() const { return band_.begin > 0 || band_.end < tiles_y_; }
 
     /// The frame drawn (cpu_renderer_occlusion.cpp): with the occlusion cut where it takes it,

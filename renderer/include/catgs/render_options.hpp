@@ -30,7 +30,8 @@ struct RenderOptions {
 /// Tile lists longer than this are split by default: the k that the H200 sweep of the issue
 /// scenes found fastest with the cache below: on the 6M city at 1080p it costs 0.01 ms against
 /// no split (1.05 ms), where k = 2048 or 4096 cost 0.1 ms; on the garden 3x3 it takes 2.16 ms
-/// against 2.55 unsplit (2048: 2.12).
+/// against 2.55 unsplit (2048: 2.12). With measured costs (WindowCost::time) it is where
+/// SplitChooser's ladder of k starts.
 inline constexpr std::uint32_t kDefaultSplitK = 8192;
 /// The largest k accepted: k is stored with the task counters in 32 bits, and no tile list of a
 /// frame within the pair budget comes near it.
