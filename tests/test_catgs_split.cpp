@@ -168,6 +168,14 @@ FrameStats measured(double rasterize_ms, double merge_ms, std::uint64_t pairs) {
     return s;
 }
 
+/// Frames that choose whether to split from measured time, at a k that dense_scene's lists pass.
+RenderOptions timed_render_options() {
+    RenderOptions o;
+    o.catgs.split_k = 32;
+    o.catgs.window_cost = WindowCost::time;
+    return o;
+}
+
 CatgsOptions timed_split_options() {
     CatgsOptions o;
     o.split_k = 8192;
@@ -267,9 +275,7 @@ TEST(SplitChooser, ExploringFramesAreNotLearnedByTheWindowCostModel) {
 
     const Scene scene = dense_scene("split exploring frames");
     const Camera cam = test::forward_camera(96, 64, 60.0);
-    RenderOptions ro;
-    ro.catgs.split_k = 32;
-    ro.catgs.window_cost = WindowCost::time;
+    const RenderOptions ro = timed_render_options();
     CpuRenderer<float> renderer(1);
     ImageF image;
     renderer.render(scene, cam, ro, image);  // split, first of its side
@@ -300,9 +306,7 @@ TEST(SplitChooser, SplitsAsTheOptionsSayWithoutTimingsAndNeverWithoutK) {
 TEST(SplitChooser, AFrameKeptWholeByThePlannerHasNoSubtasks) {
     const Scene scene = dense_scene("split chooser frames");
     const Camera cam = test::forward_camera(96, 64, 60.0);
-    RenderOptions o;
-    o.catgs.split_k = 32;
-    o.catgs.window_cost = WindowCost::time;  // cache off: every frame is a plain key frame
+    const RenderOptions o = timed_render_options();  // cache off: every frame is a plain key frame
     CpuRenderer<float> renderer(1);
     ImageF first, second;
     const FrameStats a = renderer.render(scene, cam, o, first);
@@ -444,9 +448,7 @@ TEST(SplitLadder, PlanSplitOptionsCarryThePlansK) {
 TEST(SplitLadder, FramesReportThePlansK) {
     const Scene scene = dense_scene("split ladder frames");
     const Camera cam = test::forward_camera(96, 64, 60.0);
-    RenderOptions ro;
-    ro.catgs.split_k = 32;
-    ro.catgs.window_cost = WindowCost::time;
+    const RenderOptions ro = timed_render_options();
     CpuRenderer<float> renderer(1);
     ImageF image;
     for (int i = 0; i < 3 * kSplitRungProbeEvery; ++i) {
