@@ -460,5 +460,33 @@ TEST(SplitLadder, FramesReportThePlansK) {
     }
 }
 
+// A cached frame draws its key frame's task list at the k it was split at, whatever k its own
+// options or plan name (the CUDA backend's twin: CudaCatgsTest.CachedFramesDrawTheKeyFrames-
+// SplitWhateverTheirOwnK, where the launch once followed the frame's own k and hung).
+TEST(SplitLadder, CachedFramesKeepTheirKeyFramesK) {
+    const Scene scene = dense_scene("cached frames keep k");
+    Camera cam = test::forward_camera(96, 64, 60.0);
+    RenderOptions o;
+    o.catgs.cache = CacheMode::speculative;
+    o.catgs.adaptive_window = false;
+    o.catgs.window = 4;
+    o.catgs.resort_cached = false;  // the same pose: the key frame's order and task list as they are
+    o.catgs.split_k = 7;
+    CpuRenderer<float> renderer(1);
+    ImageF key_image, image;
+    const FrameStats key = renderer.render(scene, cam, o, key_image);
+    ASSERT_TRUE(key.key_frame);
+    ASSERT_GT(key.split_tasks, 0u);
+    o.catgs.split_k = 4096;
+    for (int i = 1; i < 3; ++i) {
+        cam.timestamp = i / 30.0;
+        const FrameStats cached = renderer.render(scene, cam, o, image);
+        EXPECT_FALSE(cached.key_frame) << "frame " << i;
+        EXPECT_EQ(cached.split_k, 7u) << "frame " << i;
+        EXPECT_EQ(cached.split_tasks, key.split_tasks) << "frame " << i;
+        EXPECT_EQ(compare(to_rgb8(image), to_rgb8(key_image)).max_abs, 0) << "frame " << i;
+    }
+}
+
 }  // namespace
 }  // namespace catgs
