@@ -1,5 +1,7 @@
 #include "catgs/split_choice.hpp"
 
+#include <algorithm>
+
 #include "catgs/render_options.hpp"
 #include "catgs/stage.hpp"
 
@@ -13,7 +15,9 @@ std::uint32_t SplitChooser::rung_k(int rung) const {
 }
 
 int SplitChooser::rung_to_probe() {
-    if (++since_rung_probe_ < kSplitRungProbeEvery) return -1;
+    // Saturates: while no neighbour is due it stays at the bound (a stream may run for days).
+    since_rung_probe_ = std::min(since_rung_probe_ + 1, kSplitRungProbeEvery);
+    if (since_rung_probe_ < kSplitRungProbeEvery) return -1;
     const CostEstimate& chosen = rungs_[rung_];
     for (int tries = 0; tries < 2; ++tries) {
         const int rung = rung_ + (probe_up_ ? 1 : -1);
