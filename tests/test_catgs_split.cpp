@@ -466,12 +466,7 @@ TEST(SplitLadder, FramesReportThePlansK) {
 TEST(SplitLadder, CachedFramesKeepTheirKeyFramesK) {
     const Scene scene = dense_scene("cached frames keep k");
     Camera cam = test::forward_camera(96, 64, 60.0);
-    RenderOptions o;
-    o.catgs.cache = CacheMode::speculative;
-    o.catgs.adaptive_window = false;
-    o.catgs.window = 4;
-    o.catgs.resort_cached = false;  // the same pose: the key frame's order and task list as they are
-    o.catgs.split_k = 7;
+    RenderOptions o = test::cached_list_options(7);
     CpuRenderer<float> renderer(1);
     ImageF key_image, image;
     const FrameStats key = renderer.render(scene, cam, o, key_image);

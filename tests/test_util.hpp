@@ -15,6 +15,7 @@
 
 #include "catgs/camera.hpp"
 #include "catgs/error.hpp"
+#include "catgs/render_options.hpp"
 #include "catgs/scene.hpp"
 
 namespace catgs::test {
@@ -107,6 +108,20 @@ inline Camera forward_camera(int width, int height, double fov_x_degrees, std::a
     c.intrinsics = intrinsics_from_fov(width, height, fov_x_degrees);
     c.pose = pose_from_centre(centre, {1, 0, 0, 0, 1, 0, 0, 0, 1});
     return c;
+}
+
+/// The speculative cache with a fixed W = 4 whose cached frames of an unmoved camera keep the
+/// key frame's depth order and task list as they are, split at `split_k`: the scene of the
+/// backends' twin tests of what a cached frame draws (CachedFrames...K in test_catgs_split.cpp
+/// and gpu/test_cuda_catgs.cpp).
+inline RenderOptions cached_list_options(std::uint32_t split_k) {
+    RenderOptions o;
+    o.catgs.cache = CacheMode::speculative;
+    o.catgs.adaptive_window = false;
+    o.catgs.window = 4;
+    o.catgs.resort_cached = false;
+    o.catgs.split_k = split_k;
+    return o;
 }
 
 }  // namespace catgs::test

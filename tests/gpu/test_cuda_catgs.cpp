@@ -81,12 +81,7 @@ TEST_F(CudaCatgsTest, CachedFramesDrawTheKeyFramesSplitWhateverTheirOwnK) {
     const ImageRGB8 reference = cpu_full(scene, cam);
     cuda::CudaRenderer<float> gpu;
     gpu.set_scene(std::make_shared<cuda::DeviceScene>(scene, gpu.stream()));
-    RenderOptions o;
-    o.catgs.cache = CacheMode::speculative;
-    o.catgs.adaptive_window = false;
-    o.catgs.window = 4;
-    o.catgs.resort_cached = false;  // the same pose: the key frame's order and task list as they are
-    o.catgs.split_k = 7;
+    RenderOptions o = test::cached_list_options(7);
     ImageRGB8 image;
     const FrameStats key = gpu.render(cam, o, &image, nullptr);
     ASSERT_TRUE(key.key_frame);
