@@ -4,6 +4,7 @@
 #include <cmath>
 #include <limits>
 #include <sstream>
+#include <vector>
 
 #include <nlohmann/json.hpp>
 
@@ -43,10 +44,38 @@ void Scene::update_bounds() {
     bounds = b;
 }
 
+std::array<double, 3> scene_origin(const Bounds& bounds, std::size_t n,
+                                   const std::function<double(std::size_t, int)>& world) {
+    std::array<double, 3> origin{0, 0, 0};
+    if (n == 0) return origin;
+    const std::size_t stride = (n + kOriginSample - 1) / kOriginSample;
+    std::vector<double> sample;
+    sample.reserve(n / stride + 1);
+    for (int a = 0; a < 3; ++a) {
+        origin[a] = 0.5 * (bounds.min[a] + bounds.max[a]);
+        sample.clear();
+        for (std::size_t i = 0; i < n; i += stride) {
+            const double v = world(i, a);
+            if (std::isfinite(v)) sample.push_back(v);
+        }
+        if (sample.empty()) continue;
+        const auto at = [&](double share) {
+            const auto k = static_cast<std::ptrdiff_t>(share * static_cast<double>(sample.size() - 1));
+            std::nth_element(sample.begin(), sample.begin() + k, sample.end());
+            return sample[static_cast<std::size_t>(k)];
+        };
+        const double lo = at(kOriginStrayShare), hi = at(1.0 - kOriginStrayShare);
+        const double bulk_centre = 0.5 * (lo + hi), bulk_half = 0.5 * (hi - lo);
+        if (std::abs(origin[a] - bulk_centre) > kOriginStrayFactor * bulk_half) origin[a] = bulk_centre;
+    }
+    return origin;
+}
+
 void Scene::recentre() {
     update_bounds();
-    std::array<double, 3> centre;
-    for (int a = 0; a < 3; ++a) centre[a] = 0.5 * (bounds.min[a] + bounds.max[a]);
+    const std::array<double, 3> centre = scene_origin(bounds, count(), [this](std::size_t i, int a) {
+        return origin[a] + static_cast<double>(positions[3 * i + a]);
+    });
     for (std::size_t i = 0; i < count(); ++i)
         for (int a = 0; a < 3; ++a)
             positions[3 * i + a] =

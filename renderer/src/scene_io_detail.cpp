@@ -384,6 +384,7 @@ Scene SceneBuilder::finish(LoadReport* report) {
     // UTM-sized captures lose nothing beyond the final rounding of the offsets.
     scene_.origin = {0.0, 0.0, 0.0};
     if (recentre_) {
+        Bounds world_bounds;
         for (int a = 0; a < 3; ++a) {
             double lo = std::numeric_limits<double>::infinity();
             double hi = -lo;
@@ -391,8 +392,10 @@ Scene SceneBuilder::finish(LoadReport* report) {
                 lo = std::min(lo, world_[3 * i + a]);
                 hi = std::max(hi, world_[3 * i + a]);
             }
-            scene_.origin[a] = 0.5 * (lo + hi);
+            world_bounds.min[a] = lo;
+            world_bounds.max[a] = hi;
         }
+        scene_.origin = scene_origin(world_bounds, kept_, [this](std::size_t i, int a) { return world_[3 * i + a]; });
     }
     for (std::size_t i = 0; i < kept_; ++i)
         for (int a = 0; a < 3; ++a)

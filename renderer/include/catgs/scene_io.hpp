@@ -28,8 +28,9 @@ struct LoadOptions {
     /// Records with non-finite values or a zero-norm quaternion are an error by default;
     /// with this set they are dropped and counted in LoadReport::dropped_invalid.
     bool drop_invalid = false;
-    /// Move the origin to the centre of the bounds (see Scene). Tests that need the naive
-    /// absolute-float layout turn it off.
+    /// Move the origin to the centre of the bounds, or of the bulk where stray Gaussians set the
+    /// bounds (scene_origin, see Scene). Tests that need the naive absolute-float layout turn
+    /// it off.
     bool recentre = true;
     /// load_scene only: reorder the Gaussians along a Morton curve and cut them into spatial
     /// chunks (partition_into_chunks), for chunk-level culling. The single-format readers
@@ -116,7 +117,8 @@ Scene read_glb(const std::string& path, const LoadOptions& options = {}, LoadRep
 /// formed in double), scale_* (log) and opacity (logit, clamped to +-40) are written as
 /// double, so that reading the file back gives bit-identical activated floats; every other
 /// property is float. Exact for positions when the scene's origin is the centre of its
-/// bounds (as after loading with recentre) or zero.
+/// bounds (as after loading with recentre, unless stray Gaussians moved it to the bulk's:
+/// scene_origin) or zero.
 void write_ply(const Scene& scene, const std::string& path);
 
 /// Opens a scene from a path (the format recognised by content, .splat by extension: see
