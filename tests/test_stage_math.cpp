@@ -385,13 +385,15 @@ TEST(StageEnvelope, FootprintBoundHoldsForEveryOrientation) {
     EXPECT_GT(on_axis, 10000);
 }
 
-// uncached_can_enter: never beyond the clamp region, always for a mean inside the image, and
-// then with bound = footprint_bound_px; float decides as double except within 1e-4 px (relative
-// to the reach) of the decision.
+// uncached_can_enter: always for a mean inside the image, then with bound = footprint_bound_px;
+// beyond the clamp region exactly when a sphere of the footprint's 3D reach, grown by the
+// translation guard, reaches past the image's side planes widened by the pixel guard (here
+// from the camera-space point, as a plane distance); float decides as double except within
+// 1e-4 (relative to the reach) of the decision.
 TEST(StageEnvelope, UncachedCanEnterWithinReachOfTheImage) {
     const std::uint64_t seed = test::fresh_seed("stage uncached can enter");
     std::mt19937_64 rng(seed);
-    int entering = 0, staying = 0, band = 0;
+    int entering = 0, staying = 0, band = 0, beyond_entering = 0;
     double widest_flip = 0;
     for (int i = 0; i < 20000; ++i) {
         const Camera camera = stage::random_camera(rng);
@@ -409,7 +411,29 @@ TEST(StageEnvelope, UncachedCanEnterWithinReachOfTheImage) {
             const bool f = uncached_can_enter(pf, mode, vf, guard, move, max_scale, bf);
             const bool inside = pd.mean.x >= 0 && pd.mean.x <= vd.width && pd.mean.y >= 0 && pd.mean.y <= vd.height;
             if (!in_clamp_region(vd, pd.mean)) {
-                EXPECT_FALSE(d) << "case " << i << " (CATGS_TEST_SEED=" << seed << ")";
+                const double z = pd.depth, x = (pd.mean.x - vd.cx) * z / vd.fx, y = (pd.mean.y - vd.cy) * z / vd.fy;
+                const double level = std::max(0.0, opacity_level(pd.opacity));
+                const double sigmas = mode == Culling::bbox3sigma ? kBBoxSigmas : std::sqrt(level);
+                const double sphere =
+                    sigmas * (double(max_scale) + std::sqrt(kCovarianceBlur) * z / std::min(vd.fx, vd.fy)) + move;
+                // The planes x = a z through the widened image sides, as (normal . p) / |normal|.
+                const double g = guard, right = (vd.width + g - vd.cx) / vd.fx, left = (vd.cx + g) / vd.fx;
+                const double bottom = (vd.height + g - vd.cy) / vd.fy, top = (vd.cy + g) / vd.fy;
+                const double past =
+                    std::max({(x - right * z) / std::hypot(1.0, right), (-x - left * z) / std::hypot(1.0, left),
+                              (y - bottom * z) / std::hypot(1.0, bottom), (-y - top * z) / std::hypot(1.0, top)});
+                if (std::fabs(past - sphere) < 1e-4 * (1 + sphere)) {
+                    ++band;
+                    continue;
+                }
+                EXPECT_EQ(d, past <= sphere) << "case " << i << " (CATGS_TEST_SEED=" << seed << ")";
+                EXPECT_EQ(f, d) << "case " << i << " (CATGS_TEST_SEED=" << seed << ")";
+                if (d) {
+                    ++beyond_entering;
+                    EXPECT_EQ(bd, footprint_bound_px(pd, mode, double(max_scale), std::max(vd.fx, vd.fy)));
+                }
+                (d ? entering : staying) += 1;
+                continue;
             }
             if (inside) {
                 EXPECT_TRUE(d) << "case " << i << " (CATGS_TEST_SEED=" << seed << ")";
@@ -433,14 +457,15 @@ TEST(StageEnvelope, UncachedCanEnterWithinReachOfTheImage) {
                 ++band;
                 continue;
             }
-            EXPECT_EQ(d, in_clamp_region(vd, pd.mean) && away <= reach)
-                << "case " << i << " (CATGS_TEST_SEED=" << seed << ")";
+            EXPECT_EQ(d, away <= reach) << "case " << i << " (CATGS_TEST_SEED=" << seed << ")";
             EXPECT_EQ(f, d) << "case " << i << " (CATGS_TEST_SEED=" << seed << ")";
         }
     }
-    std::cout << "[stage] uncached_can_enter: " << entering << " can enter, " << staying << " cannot, " << band
+    std::cout << "[stage] uncached_can_enter: " << entering << " can enter (" << beyond_entering
+              << " from beyond the clamp region), " << staying << " cannot, " << band
               << " at the decision's edge; float differs at most " << widest_flip << " from it" << std::endl;
     EXPECT_GT(entering, 1000);
+    EXPECT_GT(beyond_entering, 0);
     EXPECT_GT(staying, 1000);
 }
 

@@ -94,14 +94,19 @@ __global__ void __launch_bounds__(Threads, MinBlocks)
         }
         touched[slot] = tiles;
         pairs = tiles;
-        if (Summarize && tiles == 0 && guard > T(0) && culling != Culling::exact && (valid & 1u)) {
-            // In no list, but able to enter the image within the envelope (envelope.hpp).
+        if (Summarize && tiles == 0 && guard > T(0) && culling != Culling::exact) {
+            // In no list, but able to enter the image within the envelope (envelope.hpp), near
+            // any pose of the window: a cached frame may lie near any of them.
             const float* sc = gaussian_ref(scene, i).scale;
-            T bound = T(0);
-            if (uncached_can_enter(poses[0], culling, views[0], guard, guard_translation,
-                                   static_cast<T>(fmaxf(fabsf(sc[0]), fmaxf(fabsf(sc[1]), fabsf(sc[2])))), bound)) {
-                nearest = fminf(nearest, static_cast<float>(poses[0].depth));
-                extent = fmaxf(extent, static_cast<float>(bound));
+            const T max_scale = static_cast<T>(fmaxf(fabsf(sc[0]), fmaxf(fabsf(sc[1]), fabsf(sc[2]))));
+#pragma unroll
+            for (int k = 0; k < MaxWindow; ++k) {
+                T bound = T(0);
+                if (k < window && (valid >> k & 1u) &&
+                    uncached_can_enter(poses[k], culling, views[k], guard, guard_translation, max_scale, bound)) {
+                    nearest = fminf(nearest, static_cast<float>(poses[k].depth));
+                    extent = fmaxf(extent, static_cast<float>(bound));
+                }
             }
         }
         if (tiles > 0) {

@@ -276,16 +276,19 @@ void CpuRenderer<T>::preprocess(const Scene& scene, const View<T>& actual, const
                     if (tiles_touched_[i] == 0) {
                         // In no list, but close enough to enter the image within the envelope (a near
                         // Gaussian just outside it moves f dt / z; a needle just outside opens up into
-                        // it): the planner must bound its motion too, or a cached frame misses it.
-                        T bound = T(0);
+                        // it): the planner must bound its motion too, or a cached frame misses it. At
+                        // every pose of the window: a cached frame may lie near any of them.
                         const float* sc = &scene.scales[3 * i];
-                        if (window.guard > T(0) && culling != Culling::exact && (valid & 1u) &&
-                            uncached_can_enter(
-                                poses[0], culling, window.views[0], window.guard, window.guard_translation,
-                                static_cast<T>(std::max({std::fabs(sc[0]), std::fabs(sc[1]), std::fabs(sc[2])})),
-                                bound)) {
-                            local_min = std::min(local_min, static_cast<double>(poses[0].depth));
-                            local_bound = std::max(local_bound, static_cast<double>(bound));
+                        const T max_scale =
+                            static_cast<T>(std::max({std::fabs(sc[0]), std::fabs(sc[1]), std::fabs(sc[2])}));
+                        for (int k = 0; k < w && window.guard > T(0) && culling != Culling::exact; ++k) {
+                            T bound = T(0);
+                            if ((valid >> k & 1u) &&
+                                uncached_can_enter(poses[k], culling, window.views[k], window.guard,
+                                                   window.guard_translation, max_scale, bound)) {
+                                local_min = std::min(local_min, static_cast<double>(poses[k].depth));
+                                local_bound = std::max(local_bound, static_cast<double>(bound));
+                            }
                         }
                         continue;
                     }

@@ -15,12 +15,47 @@
 
 namespace catgs {
 
-/// Speculative cache: can a Gaussian that is in no list at the key pose `key` (projected there
-/// as `g`) enter the image at a pose the envelope accepts? Such a pose turns the view by at
-/// most `guard` pixels and moves the camera by at most `guard_translation` metres, so the mean
-/// moves by at most guard + f kappa dt / z (first order, inside the Jacobian clamp region) and
-/// the footprint grows by at most b (dt / z + guard / f) towards footprint_bound_px b. When it
-/// can, the planner must bound its motion too: `bound` receives b.
+/// Beyond the Jacobian clamp region, where uncached_can_enter's first order no longer holds:
+/// can the footprint of `g` (seen from `key`) reach the image once the camera has moved by
+/// `guard_translation` metres and turned by `guard` pixels? In metres, as chunk_may_be_visible
+/// asks it of a chunk: the footprint is a sphere of sigmas (largest scale + the blur's width at
+/// its depth) about the mean; a translation moves it by at most guard_translation against the
+/// view's planes, and the turn is covered by widening the image's side planes by `guard`
+/// pixels (a turn the planner accepts moves no direction by more than guard / (f kappa)
+/// radians, less than the widened planes' angle). A point near the camera moves far on screen:
+/// 0.2 m of translation brings a Gaussian 0.5 m away in from 30 px past a 160 px wide image,
+/// beyond the clamp region (CatgsEnvelopeTraps).
+template <typename T>
+CATGS_HD bool footprint_may_reach_image(const Projected<T>& g, Culling mode, const View<T>& key, T guard,
+                                        T guard_translation, T max_scale) {
+    const T focal_min = key.fx < key.fy ? key.fx : key.fy;
+    const T level = opacity_level(g.opacity);
+    const T sigmas = mode == Culling::bbox3sigma ? static_cast<T>(kBBoxSigmas) : sqrt_of(level > T(0) ? level : T(0));
+    const T z = g.depth;
+    const T reach = sigmas * (max_scale + sqrt_of(static_cast<T>(kCovarianceBlur)) * z / focal_min) + guard_translation;
+    const T w = static_cast<T>(key.width), h = static_cast<T>(key.height);
+    // A side plane x <= a z (a = its tangent) lies (x - a z) / sqrt(1 + a^2) from the point; with
+    // x = (mean - c) z / f that is z (mean - edge) / sqrt(f^2 + (edge - c)^2), edge the widened
+    // image side in pixels. Outside all of them by more than `reach`: it cannot come in.
+    const auto beyond = [z](T past_edge_px, T f, T edge_from_centre_px) {
+        return z * past_edge_px / sqrt_of(f * f + edge_from_centre_px * edge_from_centre_px);
+    };
+    const T right = beyond(g.mean.x - (w + guard), key.fx, w + guard - key.cx);
+    const T left = beyond(-guard - g.mean.x, key.fx, key.cx + guard);
+    const T bottom = beyond(g.mean.y - (h + guard), key.fy, h + guard - key.cy);
+    const T top = beyond(-guard - g.mean.y, key.fy, key.cy + guard);
+    // Written so that NaN keeps the Gaussian: the planner then bounds its motion.
+    return !(right > reach || left > reach || bottom > reach || top > reach);
+}
+
+/// Speculative cache: can a Gaussian that is in no list at a pose of the window (`key`,
+/// projected there as `g`) enter the image at a pose the envelope accepts near it? Such a pose
+/// turns the view by at most `guard` pixels and moves the camera by at most
+/// `guard_translation` metres, so the mean moves by at most guard + f kappa dt / z (first
+/// order, inside the Jacobian clamp region) and the footprint grows by at most
+/// b (dt / z + guard / f) towards footprint_bound_px b; beyond the clamp region
+/// footprint_may_reach_image asks it in metres. When it can, the planner must bound its motion
+/// too: `bound` receives b.
 template <typename T>
 CATGS_HD bool uncached_can_enter(const Projected<T>& g, Culling mode, const View<T>& key, T guard, T guard_translation,
                                  T max_scale, T& bound) {
@@ -28,9 +63,11 @@ CATGS_HD bool uncached_can_enter(const Projected<T>& g, Culling mode, const View
     const T tangent = max_clamp_tangent(key);
     const T kappa = T(1) + tangent * tangent;
     const T w = static_cast<T>(key.width), h = static_cast<T>(key.height), z = g.depth;
-    // Beyond the clamp region a point is too far off-axis to come in within the envelope, and
-    // first order no longer holds.
-    if (!in_clamp_region(key, g.mean)) return false;
+    if (!in_clamp_region(key, g.mean)) {
+        if (!footprint_may_reach_image(g, mode, key, guard, guard_translation, max_scale)) return false;
+        bound = footprint_bound_px(g, mode, max_scale, focal);
+        return true;
+    }
     bound = footprint_bound_px(g, mode, max_scale, focal);
     const T reach =
         guard * (T(1) + bound / focal) + focal * kappa * guard_translation / z + bound * (T(1) + guard_translation / z);
