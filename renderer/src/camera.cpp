@@ -1,12 +1,24 @@
 #include "catgs/camera.hpp"
 
 #include <cmath>
+#include <sstream>
+#include <tuple>
 
 #include "catgs/constants.hpp"
 #include "catgs/error.hpp"
 #include "catgs/host_vector.hpp"
 
 namespace catgs {
+namespace {
+
+/// As a person writes it: 1e+30, 0.001, 179.9 (not 179.900000).
+std::string format_number(double v) {
+    std::ostringstream s;
+    s << v;
+    return s.str();
+}
+
+}  // namespace
 
 Intrinsics intrinsics_from_fov(int width, int height, double fov_x_degrees) {
     Intrinsics k;
@@ -29,6 +41,19 @@ void validate(const Intrinsics& k, const std::string& what) {
     if (!(std::isfinite(k.fx) && std::isfinite(k.fy) && k.fx > 0 && k.fy > 0))
         throw Error(what + ": focal lengths fx=" + std::to_string(k.fx) + ", fy=" + std::to_string(k.fy) +
                     " must be finite and positive");
+    // A finite focal length can still put every Gaussian in one pixel or spread one over the
+    // sky (fx = 1e30 drew a blank frame): the field of view is held to the range --fov takes
+    // and the server's requests are held to.
+    const auto fov_degrees = [](double size, double f) { return 2.0 * std::atan(size / (2.0 * f)) * 180.0 / kPi; };
+    for (const auto& [f, size, axis] : {std::tuple{k.fx, k.width, "horizontal"}, {k.fy, k.height, "vertical"}}) {
+        const double fov = fov_degrees(size, f);
+        if (!(fov >= kMinFieldOfViewDegrees && fov <= kMaxFieldOfViewDegrees))
+            throw Error(what + ": focal length " + format_number(f) + " gives a " + axis + " field of view of " +
+                        format_number(fov) + " degrees, outside [" + format_number(kMinFieldOfViewDegrees) + ", " +
+                        format_number(kMaxFieldOfViewDegrees) + "]");
+    }
+    // A principal point outside the image is a crop of a larger one (tests/test_stress.cpp
+    // renders its 8192 x 8192 reference that way); only a non-finite one is refused.
     if (!(std::isfinite(k.cx) && std::isfinite(k.cy))) throw Error(what + ": principal point must be finite");
 }
 

@@ -32,7 +32,8 @@ struct Camera {
 Intrinsics intrinsics_from_fov(int width, int height, double fov_x_degrees);
 
 /// Throws catgs::Error (prefixed with `what`) unless sizes are positive, focal lengths
-/// finite and positive, and the principal point finite.
+/// finite and positive with fields of view within [kMinFieldOfViewDegrees,
+/// kMaxFieldOfViewDegrees], and the principal point finite (outside the image it is a crop).
 void validate(const Intrinsics& intrinsics, const std::string& what);
 
 /// Whether two cameras make the same image grid and projection (every field equal): what a
