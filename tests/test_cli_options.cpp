@@ -49,6 +49,27 @@ TEST(CliOptions, ReuseOrderDefaultReadsAsAPersonWritesIt) {
 
 namespace {
 
+/// A --sweep entry takes the pipeline flags only; a run-wide flag in it is named as written,
+/// with what an entry takes instead (CLI11 alone listed it backwards: "double --precision").
+TEST(CliOptions, SweepEntryNamesAFlagItDoesNotTake) {
+    const auto configs = catgs::cli::parse_sweep("plain: --cache off --split off; w4: --window 4");
+    ASSERT_EQ(configs.size(), 2u);
+    EXPECT_EQ(configs[0].name, "plain");
+    EXPECT_EQ(configs[1].options.catgs.window, 4);
+    try {
+        catgs::cli::parse_sweep("plain: --cache off; double: --precision double --split off");
+        ADD_FAILURE() << "--precision in a sweep entry must be refused";
+    } catch (const catgs::Error& e) {
+        const std::string what = e.what();
+        EXPECT_NE(what.find("--sweep entry 'double': '--precision double' is not a pipeline flag"), std::string::npos)
+            << what;
+        EXPECT_NE(what.find("an entry takes --"), std::string::npos) << what;
+        EXPECT_NE(what.find(", --split,"), std::string::npos) << what;
+        EXPECT_EQ(what.find("--help"), std::string::npos) << what;
+        EXPECT_NE(what.find("go before --sweep"), std::string::npos) << what;
+    }
+}
+
 /// --spz-axes takes rdf or rub in any case (without the flag the caller's value, rdf in the
 /// tools, stays), and names the flag and the words it takes when given anything else.
 TEST(CliOptions, SpzAxesTakesRdfOrRub) {

@@ -250,6 +250,14 @@ std::vector<SweepEntry> parse_sweep(std::string text) {
         add_pipeline_flags(app, flags);
         try {
             app.parse(entry.substr(colon + 1), false);
+        } catch (const CLI::ExtrasError&) {
+            // CLI11 lists the extras last first; name them as written, and what an entry takes.
+            std::string extras, taken;
+            for (const std::string& word : app.remaining()) extras += (extras.empty() ? "" : " ") + word;
+            for (const CLI::Option* option : app.get_options())
+                if (option->get_name() != "--help") taken += (taken.empty() ? "" : ", ") + option->get_name();
+            throw Error("--sweep entry '" + c.name + "': '" + extras + "' is not a pipeline flag; an entry takes " +
+                        taken + " (run-wide flags such as --precision, --backend or --width go before --sweep)");
         } catch (const CLI::ParseError& e) {
             throw Error("--sweep entry '" + c.name + "': " + e.what());
         }
