@@ -42,11 +42,11 @@ void add_gaussian(Scene& s, std::array<double, 3> position, double scale, double
 
 /// A ground of large Gaussians kGroundDepth ahead of cameras looking down +z, over x, y in
 /// [-span, span], and the trap.
-Scene ground_with(std::array<double, 3> trap, double trap_scale, double span) {
+Scene ground_with(std::array<double, 3> trap, double trap_scale, double span, double ground_depth = kGroundDepth) {
     Scene s;
     s.sh_degree = 0;
     for (double x = -span; x <= span; x += 3.0)
-        for (double y = -20.0; y <= 20.0; y += 3.0) add_gaussian(s, {x, y, kGroundDepth}, 1.5, 0.9, false);
+        for (double y = -20.0; y <= 20.0; y += 3.0) add_gaussian(s, {x, y, ground_depth}, 1.5, 0.9, false);
     add_gaussian(s, trap, trap_scale, 0.99, true);
     s.update_bounds();
     return s;
@@ -99,6 +99,18 @@ TEST(CatgsEnvelopeTraps, AJerkBringsInAGaussianFromBeyondTheClampRegion) {
     EXPECT_EQ(missing_over(scene, path, 16, &keys), 0u);
     EXPECT_EQ(keys.front(), 0);
     EXPECT_TRUE(keys.size() < 2 || keys[1] >= 12) << "the hover itself should be drawn from the cache";
+}
+
+TEST(CatgsEnvelopeTraps, AStepBackBringsInAGaussianBehindTheNearPlane) {
+    // 2 cm behind the camera while it hovers; a 0.24 m step back puts it 0.22 m ahead, past
+    // the 0.2 m near plane, on the optical axis.
+    const Scene scene = ground_with({0.0, 0.0, -0.02}, 0.01, 120.0, 300.0);
+    std::vector<Camera> path;
+    for (int i = 0; i < 12; ++i) path.push_back(camera_at({0, 0, 0}, i));
+    for (int i = 12; i < 16; ++i) path.push_back(camera_at({0, 0, -0.24}, i));
+    std::vector<int> keys;
+    EXPECT_EQ(missing_over(scene, path, 16, &keys), 0u);
+    EXPECT_EQ(keys.front(), 0);
 }
 
 TEST(CatgsEnvelopeTraps, ASwerveNearALaterPoseBringsInAGaussianTheKeyPoseCannotReach) {
