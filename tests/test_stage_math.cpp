@@ -493,7 +493,7 @@ TEST(StageEnvelope, BehindTheNearPlaneCanEnterOnlyNearTheCamera) {
                 static_cast<float>(v.rotation.m[0][a] * q.x + v.rotation.m[1][a] * q.y + v.rotation.m[2][a] * q.z);
         const Vec3<double> back = v.rotation * Vec3<double>{world[0], world[1], world[2]} + v.translation;
         if (!(back.z <= v.near_plane)) continue;  // float rounding moved it in front: not this test's case
-        const bool can = behind_near_can_enter(world, v, guard, reach);
+        const bool can = behind_near_can_enter(world, v, 1.0, guard, reach);
         const double tx = std::max(v.clamp_left, v.clamp_right), ty = std::max(v.clamp_top, v.clamp_bottom);
         bool visible = false;
         for (int j = 0; j < 8 && !visible; ++j) {  // cameras moved by up to the guard, backwards
@@ -514,6 +514,13 @@ TEST(StageEnvelope, BehindTheNearPlaneCanEnterOnlyNearTheCamera) {
               << std::endl;
     EXPECT_GT(seen, 100);
     EXPECT_GT(refused, 1000);
+    // A large Gaussian (a 30 m scale's reach) whose mean is 10 m behind the camera cannot pass a
+    // near plane within a 0.25 m step: refused, however far its footprint reaches. Just behind
+    // the camera, it is reported.
+    const View<double> ahead = make_view<double>(test::forward_camera(64, 48, 70.0), {0, 0, 0}, 1e-3);
+    const float behind[3] = {0.0f, 0.0f, -10.0f}, just_behind[3] = {0.0f, 0.0f, -0.1f};
+    EXPECT_FALSE(behind_near_can_enter(behind, ahead, 1.0, 0.25, 100.0));
+    EXPECT_TRUE(behind_near_can_enter(just_behind, ahead, 1.0, 0.25, 0.01));
 }
 
 }  // namespace

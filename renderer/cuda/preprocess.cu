@@ -107,7 +107,7 @@ __global__ void __launch_bounds__(Threads, MinBlocks)
                     nearest = fminf(nearest, static_cast<float>(poses[k].depth));
                     extent = fmaxf(extent, static_cast<float>(bound));
                 } else if (k < window && !(valid >> k & 1u) &&
-                           behind_near_can_enter(scene.positions + 3 * i, views[k], guard_translation,
+                           behind_near_can_enter(scene.positions + 3 * i, views[k], guard, guard_translation,
                                                  static_cast<T>(kChunkSigmas) * max_scale)) {
                     nearest = fminf(nearest, static_cast<float>(views[k].near_plane));  // at the near plane
                 }

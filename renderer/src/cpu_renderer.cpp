@@ -289,7 +289,7 @@ void CpuRenderer<T>::preprocess(const Scene& scene, const View<T>& actual, const
                                 local_min = std::min(local_min, static_cast<double>(poses[k].depth));
                                 local_bound = std::max(local_bound, static_cast<double>(bound));
                             } else if (!(valid >> k & 1u) &&
-                                       behind_near_can_enter(&scene.positions[3 * i], window.views[k],
+                                       behind_near_can_enter(&scene.positions[3 * i], window.views[k], window.guard,
                                                              window.guard_translation,
                                                              static_cast<T>(kChunkSigmas) * max_scale)) {
                                 // At the near plane as far as the planner's motion bound goes.

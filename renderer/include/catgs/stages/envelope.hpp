@@ -80,23 +80,27 @@ CATGS_HD bool uncached_can_enter(const Projected<T>& g, Culling mode, const View
 /// Speculative cache: can a Gaussian whose mean a pose of the window projects nowhere, being at
 /// or behind that pose's near plane (`view`'s, already lowered by the translation guard), come
 /// in front of the frame's near plane at a pose the envelope accepts near it? That pose's
-/// camera is at most guard_translation away and its near plane at most view.near_plane +
-/// guard_translation ahead of it, so the mean must then lie within the clamp region's
-/// frustum cut there, widened by the footprint's `reach` (metres; kChunkSigmas largest scales
-/// covers every culling mode's): within
-/// (near + guard) sqrt(1 + tx^2 + ty^2) + sqrt(2) reach + guard of this pose's camera. Rotation alone
-/// cannot bring it in, as it moves the mean along its sphere about the camera. A Gaussian 2 cm
-/// behind a hovering camera came 0.22 m ahead of it after a 0.24 m step back, in no list.
+/// camera is at most guard_translation away and turned by at most guard / f radians, which
+/// moves the mean's depth by at most guard_translation + |p| guard / f: a mean further behind
+/// the camera stays behind it. And that pose's near plane lies at most view.near_plane +
+/// guard_translation ahead, so the mean must then lie within the clamp region's frustum cut
+/// there, widened by the footprint's `reach` (metres; kChunkSigmas largest scales covers
+/// every culling mode's): within (near + guard) sqrt(1 + tx^2 + ty^2) + sqrt(2) reach + guard
+/// of this pose's camera. A Gaussian 2 cm behind a hovering camera came 0.22 m ahead of it
+/// after a 0.24 m step back, in no list.
 template <typename T>
-CATGS_HD bool behind_near_can_enter(const float* position, const View<T>& view, T guard_translation, T reach) {
+CATGS_HD bool behind_near_can_enter(const float* position, const View<T>& view, T guard, T guard_translation, T reach) {
     const Vec3<T> p{static_cast<T>(position[0]), static_cast<T>(position[1]), static_cast<T>(position[2])};
     const Vec3<T> pc = view.rotation * p + view.translation;
     if (!(pc.z <= view.near_plane)) return false;  // projected there (uncached_can_enter asks it), or NaN
+    const T distance = sqrt_of(dot(pc, pc));
+    const T turn = guard / (view.fx > view.fy ? view.fx : view.fy);
+    if (pc.z + guard_translation + distance * turn <= T(0)) return false;  // every near plane is ahead
     const T tx = view.clamp_left > view.clamp_right ? view.clamp_left : view.clamp_right;
     const T ty = view.clamp_top > view.clamp_bottom ? view.clamp_top : view.clamp_bottom;
     const T within = (view.near_plane + guard_translation) * sqrt_of(T(1) + tx * tx + ty * ty) +
                      T(1.4142135623730951) * reach + guard_translation;
-    return dot(pc, pc) <= within * within;
+    return distance <= within;
 }
 
 /// Key-frame summary: can a cached Gaussian whose union footprint touches `tiles` tiles gain
