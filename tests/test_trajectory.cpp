@@ -260,9 +260,9 @@ TEST(TrajectoryFile, ErrorsNameFileLineAndProblem) {
         {ok + "0 0 0 0 1 0 0 0 500 500 320 240 640 480.5\n", {":2: height 480.5 must be a positive whole number"}},
         {ok + "0 0 0 0 1 0 0 0 0 500 320 240 640 480\n", {":2: focal lengths"}},
         {ok + "0 0 0 0 1 0 0 0 1e30 1e30 8 8 16 16\n",
-         {":2: focal length 1e+30 gives a horizontal field of view of", "outside [0.001, 179.9]"}},
+         {":2: focal length fx 1e+30 gives a field of view of", "degrees across the image's 16 px, below 0.001"}},
         {ok + "0 0 0 0 1 0 0 0 500 1e-30 320 240 640 480\n",
-         {":2: focal length 1e-30 gives a vertical field of view of 180 degrees, outside [0.001, 179.9]"}},
+         {":2: focal length fy 1e-30 gives a field of view of 180 degrees across the image's 480 px, above 179.9"}},
         {ok + "0 0 0 0 1 0 0 0 500 500 320 240 100000 100000\n",
          {":2: image size 100000x100000 exceeds the largest supported side, 16384"}},
         {"# only a comment\n\n", {"no cameras"}},
@@ -273,6 +273,13 @@ TEST(TrajectoryFile, ErrorsNameFileLineAndProblem) {
         parts.push_back(path);
         expect_error([&] { catgs::read_trajectory(path, kDefaults); }, parts, cases[i].first);
     }
+    // The ends of --fov's range are valid on any image shape (square pixels give the shorter
+    // side less than 0.001 degrees at the narrow end).
+    for (const auto& [w, h, fov] :
+         {std::tuple{160, 90, catgs::kMinFieldOfViewDegrees}, std::tuple{90, 160, catgs::kMinFieldOfViewDegrees},
+          std::tuple{160, 90, catgs::kMaxFieldOfViewDegrees}, std::tuple{90, 160, catgs::kMaxFieldOfViewDegrees}})
+        EXPECT_NO_THROW(catgs::validate(catgs::intrinsics_from_fov(w, h, fov), "fov range"))
+            << w << "x" << h << " at " << fov;
     const std::string no_intrinsics = write_file("defaults.txt", ok);
     expect_error([&] { catgs::read_trajectory(no_intrinsics, Intrinsics{}); },
                  {no_intrinsics + ":1: default intrinsics", "image size 0x0"}, "defaults");

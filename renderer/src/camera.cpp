@@ -1,8 +1,10 @@
 #include "catgs/camera.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <sstream>
-#include <tuple>
+#include <string>
+#include <utility>
 
 #include "catgs/constants.hpp"
 #include "catgs/error.hpp"
@@ -42,15 +44,22 @@ void validate(const Intrinsics& k, const std::string& what) {
         throw Error(what + ": focal lengths fx=" + std::to_string(k.fx) + ", fy=" + std::to_string(k.fy) +
                     " must be finite and positive");
     // A finite focal length can still put every Gaussian in one pixel or spread one over the
-    // sky (fx = 1e30 drew a blank frame): the field of view is held to the range --fov takes
-    // and the server's requests are held to.
+    // sky (fx = 1e30 drew a blank frame). Each focal length's field of view is held within
+    // [kMinFieldOfViewDegrees, kMaxFieldOfViewDegrees] across the image's longer side for the
+    // lower end and its shorter side for the upper, so that --fov's whole range is valid on
+    // any image shape (--fov 0.001 on 160 x 90 gives the 90 rows 0.00056 degrees).
     const auto fov_degrees = [](double size, double f) { return 2.0 * std::atan(size / (2.0 * f)) * 180.0 / kPi; };
-    for (const auto& [f, size, axis] : {std::tuple{k.fx, k.width, "horizontal"}, {k.fy, k.height, "vertical"}}) {
-        const double fov = fov_degrees(size, f);
-        if (!(fov >= kMinFieldOfViewDegrees && fov <= kMaxFieldOfViewDegrees))
-            throw Error(what + ": focal length " + format_number(f) + " gives a " + axis + " field of view of " +
-                        format_number(fov) + " degrees, outside [" + format_number(kMinFieldOfViewDegrees) + ", " +
-                        format_number(kMaxFieldOfViewDegrees) + "]");
+    const int longer = std::max(k.width, k.height), shorter = std::min(k.width, k.height);
+    for (const auto& [f, name] : {std::pair{k.fx, "fx"}, std::pair{k.fy, "fy"}}) {
+        const double narrowest = fov_degrees(longer, f), widest = fov_degrees(shorter, f);
+        if (!(narrowest >= kMinFieldOfViewDegrees))
+            throw Error(what + ": focal length " + name + " " + format_number(f) + " gives a field of view of " +
+                        format_number(narrowest) + " degrees across the image's " + std::to_string(longer) +
+                        " px, below " + format_number(kMinFieldOfViewDegrees));
+        if (!(widest <= kMaxFieldOfViewDegrees))
+            throw Error(what + ": focal length " + name + " " + format_number(f) + " gives a field of view of " +
+                        format_number(widest) + " degrees across the image's " + std::to_string(shorter) +
+                        " px, above " + format_number(kMaxFieldOfViewDegrees));
     }
     // A principal point outside the image is a crop of a larger one (tests/test_stress.cpp
     // renders its 8192 x 8192 reference that way); only a non-finite one is refused.

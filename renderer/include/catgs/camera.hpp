@@ -33,7 +33,8 @@ Intrinsics intrinsics_from_fov(int width, int height, double fov_x_degrees);
 
 /// Throws catgs::Error (prefixed with `what`) unless sizes are positive, focal lengths
 /// finite and positive with fields of view within [kMinFieldOfViewDegrees,
-/// kMaxFieldOfViewDegrees], and the principal point finite (outside the image it is a crop).
+/// kMaxFieldOfViewDegrees] (across the image's longer side for the lower end, its shorter side
+/// for the upper), and the principal point finite (outside the image it is a crop).
 void validate(const Intrinsics& intrinsics, const std::string& what);
 
 /// Whether two cameras make the same image grid and projection (every field equal): what a
