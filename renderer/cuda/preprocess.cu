@@ -99,19 +99,11 @@ __global__ void __launch_bounds__(Threads, MinBlocks)
             // any pose of the window: a cached frame may lie near any of them.
             const float* sc = gaussian_ref(scene, i).scale;
             const T max_scale = static_cast<T>(fmaxf(fabsf(sc[0]), fmaxf(fabsf(sc[1]), fabsf(sc[2]))));
-#pragma unroll
-            for (int k = 0; k < MaxWindow; ++k) {
-                T bound = T(0);
-                if (k < window && (valid >> k & 1u) &&
-                    uncached_can_enter(poses[k], culling, views[k], guard, guard_translation, max_scale, bound)) {
-                    nearest = fminf(nearest, static_cast<float>(poses[k].depth));
-                    extent = fmaxf(extent, static_cast<float>(bound));
-                } else if (k < window && !(valid >> k & 1u) &&
-                           behind_near_can_enter(scene.positions + 3 * i, views[k], guard, guard_translation,
-                                                 static_cast<T>(kChunkSigmas) * max_scale)) {
-                    nearest = fminf(nearest, static_cast<float>(views[k].near_plane));  // at the near plane
-                }
-            }
+            T reach_depth = INFINITY, reach_bound = T(0);
+            summarize_uncached<MaxWindow>(poses, valid, window, views, scene.positions + 3 * i, culling, guard,
+                                          guard_translation, max_scale, reach_depth, reach_bound);
+            nearest = fminf(nearest, static_cast<float>(reach_depth));
+            extent = fmaxf(extent, static_cast<float>(reach_bound));
         }
         if (tiles > 0) {
             sort_depth[slot] = poses[first_valid_pose(valid)].key_depth;

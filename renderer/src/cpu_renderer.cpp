@@ -281,20 +281,13 @@ void CpuRenderer<T>::preprocess(const Scene& scene, const View<T>& actual, const
                         const float* sc = &scene.scales[3 * i];
                         const T max_scale =
                             static_cast<T>(std::max({std::fabs(sc[0]), std::fabs(sc[1]), std::fabs(sc[2])}));
-                        for (int k = 0; k < w && window.guard > T(0) && culling != Culling::exact; ++k) {
-                            T bound = T(0);
-                            if ((valid >> k & 1u) &&
-                                uncached_can_enter(poses[k], culling, window.views[k], window.guard,
-                                                   window.guard_translation, max_scale, bound)) {
-                                local_min = std::min(local_min, static_cast<double>(poses[k].depth));
-                                local_bound = std::max(local_bound, static_cast<double>(bound));
-                            } else if (!(valid >> k & 1u) &&
-                                       behind_near_can_enter(&scene.positions[3 * i], window.views[k], window.guard,
-                                                             window.guard_translation,
-                                                             static_cast<T>(kChunkSigmas) * max_scale)) {
-                                // At the near plane as far as the planner's motion bound goes.
-                                local_min = std::min(local_min, static_cast<double>(window.views[k].near_plane));
-                            }
+                        if (window.guard > T(0) && culling != Culling::exact) {
+                            T nearest = std::numeric_limits<T>::infinity(), bound = T(0);
+                            summarize_uncached<kMaxWindow>(poses, valid, w, window.views.data(),
+                                                           &scene.positions[3 * i], culling, window.guard,
+                                                           window.guard_translation, max_scale, nearest, bound);
+                            local_min = std::min(local_min, static_cast<double>(nearest));
+                            local_bound = std::max(local_bound, static_cast<double>(bound));
                         }
                         continue;
                     }

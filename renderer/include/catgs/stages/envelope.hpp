@@ -11,6 +11,7 @@
 #include "catgs/stages/culling.hpp"
 #include "catgs/stages/footprint.hpp"
 #include "catgs/stages/project.hpp"
+#include "catgs/stages/tiles.hpp"
 #include "catgs/stages/view.hpp"
 
 namespace catgs {
@@ -28,11 +29,10 @@ namespace catgs {
 template <typename T>
 CATGS_HD bool footprint_may_reach_image(const Projected<T>& g, Culling mode, const View<T>& key, T guard,
                                         T guard_translation, T max_scale) {
+    // footprint_bound_px at the smaller focal length, in metres at the mean's depth.
     const T focal_min = key.fx < key.fy ? key.fx : key.fy;
-    const T level = opacity_level(g.opacity);
-    const T sigmas = mode == Culling::bbox3sigma ? static_cast<T>(kBBoxSigmas) : sqrt_of(level > T(0) ? level : T(0));
     const T z = g.depth;
-    const T reach = sigmas * (max_scale + sqrt_of(static_cast<T>(kCovarianceBlur)) * z / focal_min) + guard_translation;
+    const T reach = footprint_bound_px(g, mode, max_scale, focal_min) * z / focal_min + guard_translation;
     const T w = static_cast<T>(key.width), h = static_cast<T>(key.height);
     // A side plane x <= a z (a = its tangent) lies (x - a z) / sqrt(1 + a^2) from the point; with
     // x = (mean - c) z / f that is z (mean - edge) / sqrt(f^2 + (edge - c)^2), edge the widened
@@ -101,6 +101,31 @@ CATGS_HD bool behind_near_can_enter(const float* position, const View<T>& view, 
     const T within = (view.near_plane + guard_translation) * sqrt_of(T(1) + tx * tx + ty * ty) +
                      T(1.4142135623730951) * reach + guard_translation;
     return distance <= within;
+}
+
+/// Key-frame summary of a Gaussian in no list, over the window's poses (`poses`, projected
+/// where `valid` has their bit): a cached frame may lie near any of them. Where it is
+/// projected and can enter (uncached_can_enter), `nearest` takes its depth and `bound` its
+/// footprint bound; where its mean is behind the near plane but can come in front
+/// (behind_near_can_enter), `nearest` takes the near plane's depth. The one loop of both
+/// backends' preprocess.
+template <int MaxWindow, typename T>
+CATGS_HD void summarize_uncached(const Projected<T>* poses, std::uint32_t valid, int window, const View<T>* views,
+                                 const float* position, Culling mode, T guard, T guard_translation, T max_scale,
+                                 T& nearest, T& bound) {
+    for (int k = 0; k < pose_loop_bound<MaxWindow>(window); ++k) {
+        if (k >= window) continue;
+        T pose_bound = T(0);
+        if (valid >> k & 1u) {
+            if (uncached_can_enter(poses[k], mode, views[k], guard, guard_translation, max_scale, pose_bound)) {
+                nearest = poses[k].depth < nearest ? poses[k].depth : nearest;
+                bound = pose_bound > bound ? pose_bound : bound;
+            }
+        } else if (behind_near_can_enter(position, views[k], guard, guard_translation,
+                                         static_cast<T>(kChunkSigmas) * max_scale)) {
+            nearest = views[k].near_plane < nearest ? views[k].near_plane : nearest;  // at the near plane
+        }
+    }
 }
 
 /// Key-frame summary: can a cached Gaussian whose union footprint touches `tiles` tiles gain
