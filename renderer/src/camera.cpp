@@ -2,7 +2,6 @@
 
 #include <algorithm>
 #include <cmath>
-#include <sstream>
 #include <string>
 #include <utility>
 
@@ -11,16 +10,6 @@
 #include "catgs/host_vector.hpp"
 
 namespace catgs {
-namespace {
-
-/// As a person writes it: 1e+30, 0.001, 179.9 (not 179.900000).
-std::string format_number(double v) {
-    std::ostringstream s;
-    s << v;
-    return s.str();
-}
-
-}  // namespace
 
 Intrinsics intrinsics_from_fov(int width, int height, double fov_x_degrees) {
     Intrinsics k;

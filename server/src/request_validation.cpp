@@ -20,12 +20,6 @@ grpc::Status invalid(const std::string& field, const std::string& problem) {
     return {grpc::StatusCode::INVALID_ARGUMENT, field + ": " + problem};
 }
 
-std::string num(double v) {
-    std::ostringstream s;
-    s << v;
-    return s.str();
-}
-
 bool finite(const v1::Vec3& v) {
     return std::isfinite(v.x()) && std::isfinite(v.y()) && std::isfinite(v.z());
 }
@@ -34,10 +28,13 @@ bool finite(const v1::Vec3& v) {
 constexpr double kMinQuaternionNorm = 1e-6;
 
 grpc::Status check_position(const v1::Vec3& p, const std::string& field) {
-    if (!finite(p)) return invalid(field, "not finite (" + num(p.x()) + ", " + num(p.y()) + ", " + num(p.z()) + ")");
+    if (!finite(p))
+        return invalid(field, "not finite (" + format_number(p.x()) + ", " + format_number(p.y()) + ", " +
+                                  format_number(p.z()) + ")");
     static_assert(kMaxAbsPosition == 1e30, "the message below spells the bound as the loaders do");
     for (const auto& [axis, value] : {std::pair{"x", p.x()}, std::pair{"y", p.y()}, std::pair{"z", p.z()}})
-        if (std::fabs(value) > kMaxAbsPosition) return invalid(field + "." + axis, num(value) + " is beyond +-1e30");
+        if (std::fabs(value) > kMaxAbsPosition)
+            return invalid(field + "." + axis, format_number(value) + " is beyond +-1e30");
     return grpc::Status::OK;
 }
 
@@ -72,10 +69,10 @@ bool sane_field_of_view(double degrees) {
 // fx = 1e300: every Gaussian culled, a blank frame); a sane field of view bounds the focal
 // length well inside float range for every protocol image size.
 grpc::Status check_focal_length(double f, double size, const std::string& field, const char* direction) {
-    if (!(std::isfinite(f) && f > 0)) return invalid(field, num(f) + " is not a positive focal length");
+    if (!(std::isfinite(f) && f > 0)) return invalid(field, format_number(f) + " is not a positive focal length");
     const double fov = field_of_view_degrees(size, f);
     if (!sane_field_of_view(fov))
-        return invalid(field, num(f) + " gives a " + direction + " field of view of " + num(fov) +
+        return invalid(field, format_number(f) + " gives a " + direction + " field of view of " + format_number(fov) +
                                   " degrees, outside " + field_of_view_range());
     return grpc::Status::OK;
 }
@@ -86,11 +83,11 @@ grpc::Status parse_intrinsics(const v1::Intrinsics& in, int width, int height, c
     if (grpc::Status s = check_focal_length(in.fx(), width, i + "fx", "horizontal"); !s.ok()) return s;
     if (grpc::Status s = check_focal_length(in.fy(), height, i + "fy", "vertical"); !s.ok()) return s;
     if (!(std::isfinite(in.cx()) && in.cx() >= 0 && in.cx() <= width))
-        return invalid(i + "cx",
-                       "principal point " + num(in.cx()) + " is outside the image width 0.." + std::to_string(width));
+        return invalid(i + "cx", "principal point " + format_number(in.cx()) + " is outside the image width 0.." +
+                                     std::to_string(width));
     if (!(std::isfinite(in.cy()) && in.cy() >= 0 && in.cy() <= height))
-        return invalid(i + "cy",
-                       "principal point " + num(in.cy()) + " is outside the image height 0.." + std::to_string(height));
+        return invalid(i + "cy", "principal point " + format_number(in.cy()) + " is outside the image height 0.." +
+                                     std::to_string(height));
     *out = Intrinsics{in.fx(), in.fy(), in.cx(), in.cy(), width, height};
     return grpc::Status::OK;
 }
@@ -100,7 +97,7 @@ grpc::Status parse_field_of_view(const v1::SessionConfig& config, int width, int
     const double fov =
         config.horizontal_fov_degrees() == 0 ? kDefaultHorizontalFovDegrees : config.horizontal_fov_degrees();
     if (!sane_field_of_view(fov))
-        return invalid(prefix + "horizontal_fov_degrees", num(fov) + " is outside " + field_of_view_range());
+        return invalid(prefix + "horizontal_fov_degrees", format_number(fov) + " is outside " + field_of_view_range());
     *out = intrinsics_from_fov(width, height, fov);
     return grpc::Status::OK;
 }
@@ -297,9 +294,10 @@ grpc::Status parse_session_config(const v1::SessionConfig& config, const Limits&
     if (p.split() == v1::SPLIT_MODE_FIXED && (p.split_k() < 1 || p.split_k() > kMaxSplitK))
         return invalid(pf + "split_k", std::to_string(p.split_k()) + " is outside 1..16777216");
     if (!(std::isfinite(p.near_plane()) && p.near_plane() >= 0))
-        return invalid(pf + "near_plane", num(p.near_plane()) + " is not a non-negative distance");
+        return invalid(pf + "near_plane", format_number(p.near_plane()) + " is not a non-negative distance");
     if (p.has_reuse_order_max_degrees() && !(p.reuse_order_max_degrees() >= 0 && p.reuse_order_max_degrees() <= 180))
-        return invalid(pf + "reuse_order_max_degrees", num(p.reuse_order_max_degrees()) + " is outside 0..180");
+        return invalid(pf + "reuse_order_max_degrees",
+                       format_number(p.reuse_order_max_degrees()) + " is outside 0..180");
     if (grpc::Status s = check_client_name(config.client_name(), f + "client_name"); !s.ok()) return s;
     if (config.max_unacked_frames() > static_cast<std::uint32_t>(kMaxUnackedFramesLimit))
         return invalid(f + "max_unacked_frames", std::to_string(config.max_unacked_frames()) + " is outside 0..2");
@@ -338,7 +336,8 @@ grpc::Status check_frame_fields(const v1::FrameRequest& request, const std::stri
     if (request.has_linear_velocity() && !finite(request.linear_velocity()))
         return invalid(f + "linear_velocity", "not finite");
     if (request.has_angular_speed() && !(std::isfinite(request.angular_speed()) && request.angular_speed() >= 0))
-        return invalid(f + "angular_speed", num(request.angular_speed()) + " is not a finite non-negative speed");
+        return invalid(f + "angular_speed",
+                       format_number(request.angular_speed()) + " is not a finite non-negative speed");
     for (int i = 0; i < request.flight_plan_size(); ++i) {
         const std::string pf = f + "flight_plan[" + std::to_string(i) + "].pose";
         if (!request.flight_plan(i).has_pose()) return invalid(pf, "missing");

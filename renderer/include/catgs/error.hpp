@@ -2,6 +2,7 @@
 // input (file, flag or field), the problem, and where it was found.
 #pragma once
 
+#include <sstream>
 #include <stdexcept>
 #include <string>
 
@@ -25,5 +26,13 @@ class LimitError : public Error {
 public:
     using Error::Error;
 };
+
+/// A number in a message as a person writes it (1e+30, 0.001, 179.9), not std::to_string's
+/// six fixed decimals (0.000000 for 1e-30).
+inline std::string format_number(double value) {
+    std::ostringstream s;
+    s << value;
+    return s.str();
+}
 
 }  // namespace catgs
