@@ -2,6 +2,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <limits>
 #include <string>
 #include <tuple>
 
@@ -10,6 +11,7 @@
 #include "catgs/parallel.hpp"
 #include "catgs/render_options.hpp"
 #include "cli_options.hpp"
+#include "scene_io_fixtures.hpp"
 
 namespace {
 
@@ -79,22 +81,56 @@ TEST(CliOptions, SpzAxesTakesRdfOrRub) {
           std::tuple{"--spz-axes RUB", catgs::SpzAxes::rdf, catgs::SpzAxes::rub},
           std::tuple{"--spz-axes rdf", catgs::SpzAxes::rub, catgs::SpzAxes::rdf}}) {
         CLI::App app{"test"};
-        std::string scene;
-        catgs::SpzAxes axes = start;
-        catgs::cli::add_scene_flags(app, scene, axes);
+        catgs::cli::SceneFlags flags{"builtin:city"};
+        flags.spz_axes = start;
+        catgs::cli::add_scene_flags(app, flags);
         app.parse(args, false);
-        EXPECT_EQ(axes, expected) << "'" << args << "'";
+        EXPECT_EQ(flags.spz_axes, expected) << "'" << args << "'";
     }
     CLI::App app{"test"};
-    std::string scene;
-    catgs::SpzAxes axes = catgs::SpzAxes::rdf;
-    catgs::cli::add_scene_flags(app, scene, axes);
+    catgs::cli::SceneFlags flags{"builtin:city"};
+    catgs::cli::add_scene_flags(app, flags);
     try {
         app.parse("--spz-axes luf", false);
         FAIL() << "luf accepted";
     } catch (const CLI::ParseError& e) {
         EXPECT_NE(std::string(e.what()).find("--spz-axes: luf not in {rdf,rub}"), std::string::npos) << e.what();
     }
+}
+
+/// catgs-render and catgs-bench load a scene with invalid records alike: refused, naming the
+/// record, unless --drop-invalid, which drops it and says so on stderr (a benchmark must not
+/// time fewer Gaussians than the file holds without telling).
+TEST(CliOptions, DropInvalidDropsAndTellsOrTheLoadIsRefused) {
+    using namespace catgs::scene_io_test;
+    Ply ply = graphdeco_ply(5, 0);
+    ply.rows[3]["scale_1"] = std::numeric_limits<double>::quiet_NaN();
+    const std::string path = tmp_path("nan.ply");
+    write_file(path, ply.bytes());
+
+    CLI::App strict_app{"test"};
+    catgs::cli::SceneFlags strict{"builtin:city"};
+    catgs::cli::add_scene_flags(strict_app, strict);
+    strict_app.parse("--scene " + path, false);
+    EXPECT_FALSE(strict.drop_invalid);
+    const std::string message = catgs::test::error_of([&] { catgs::cli::load_scene(strict, true); });
+    EXPECT_NE(message.find("record 3, property 'scale_1'"), std::string::npos) << message;
+
+    CLI::App app{"test"};
+    catgs::cli::SceneFlags flags{"builtin:city"};
+    catgs::cli::add_scene_flags(app, flags);
+    app.parse("--scene " + path + " --drop-invalid", false);
+    ASSERT_TRUE(flags.drop_invalid);
+    ::testing::internal::CaptureStderr();
+    const catgs::Scene scene = catgs::cli::load_scene(flags, false);
+    const std::string told = ::testing::internal::GetCapturedStderr();
+    EXPECT_EQ(scene.count(), 4u);
+    EXPECT_NE(told.find("dropped 1 invalid and 0 transparent (opacity < 1/255) Gaussians of 5\n"), std::string::npos)
+        << told;
+
+    ::testing::internal::CaptureStderr();
+    EXPECT_EQ(catgs::cli::load_scene(flags, true).count(), 4u);
+    EXPECT_EQ(::testing::internal::GetCapturedStderr(), "");
 }
 
 /// --width, --height and --fov are refused as they are parsed, before a scene loads, with the

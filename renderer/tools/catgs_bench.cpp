@@ -38,8 +38,7 @@ namespace {
 constexpr double kPsnrCap = 100.0;
 
 struct Options {
-    std::string scene = "builtin:city?gaussians=1000000&seed=1";
-    catgs::SpzAxes spz_axes = catgs::SpzAxes::rdf;
+    catgs::cli::SceneFlags scene{"builtin:city?gaussians=1000000&seed=1"};
     std::string grid = "1x1";
     int sh_degree = -1;  // -1: the scene's
     std::string up = "z";
@@ -377,10 +376,7 @@ int run(const Options& o) {
         throw catgs::Error("--reference '" + o.reference + "': expected none, exact or opacity-aware");
     const std::vector<Config> configs = make_configs(o);
 
-    catgs::LoadOptions load;
-    load.spz_axes = o.spz_axes;
-    load.progress = catgs::stderr_progress(!o.quiet);
-    auto scene = std::make_shared<catgs::Scene>(catgs::load_scene(o.scene, load));
+    auto scene = std::make_shared<catgs::Scene>(catgs::cli::load_scene(o.scene, o.quiet));
     if (grid_x * grid_y > 1) *scene = catgs::replicate_grid(*scene, grid_x, grid_y, up_axis);
     if (o.sh_degree >= 0) catgs::truncate_sh(*scene, o.sh_degree);
     const catgs::Intrinsics intrinsics = catgs::intrinsics_from_fov(o.width, o.height, o.fov);
@@ -417,7 +413,8 @@ int run(const Options& o) {
         nlohmann::json doc_results = nlohmann::json::array();
         for (const Result& r : results) doc_results.push_back(result_json(r));
         nlohmann::json doc{{"scene", nlohmann::json::parse(catgs::describe_json(*scene))},
-                           {"scene_spec", o.scene},
+                           {"scene_spec", o.scene.scene},
+                           {"drop_invalid", o.scene.drop_invalid},
                            {"grid", o.grid},
                            {"trajectory", o.trajectory},
                            {"renderer", renderer_name},
@@ -442,7 +439,7 @@ int main(int argc, char** argv) {
     catgs::request_gpu_hardware_queues();
     Options o;
     CLI::App app{"catgs-bench: per-stage timings of a renderer along a camera path, and time against error"};
-    catgs::cli::add_scene_flags(app, o.scene, o.spz_axes);
+    catgs::cli::add_scene_flags(app, o.scene);
     app.add_option("--sh-degree", o.sh_degree,
                    "render with the SH coefficients above this degree (0..3) dropped; 0: view-independent colour "
                    "(default: the scene's degree)")

@@ -25,8 +25,7 @@
 namespace {
 
 struct Options {
-    std::string scene = "builtin:city?gaussians=200000&seed=1";
-    catgs::SpzAxes spz_axes = catgs::SpzAxes::rdf;
+    catgs::cli::SceneFlags scene{"builtin:city?gaussians=200000&seed=1"};
     std::string cameras;
     std::string trajectory;
     std::string out;
@@ -42,7 +41,6 @@ struct Options {
     int threads = 0;
     catgs::cli::ShardFlags sharding;
     long max_frames = -1;
-    bool drop_invalid = false;
     bool info = false;
     bool json = false;
     bool quiet = false;
@@ -129,16 +127,8 @@ int run(const Options& o) {
     if (!o.cameras.empty() && !o.trajectory.empty())
         throw catgs::Error("--cameras and --trajectory are exclusive: give one camera source");
 
-    catgs::LoadOptions load;
-    load.spz_axes = o.spz_axes;
-    load.drop_invalid = o.drop_invalid;
-    load.progress = catgs::stderr_progress(!o.quiet);
-    catgs::LoadReport report;
-    auto scene = std::make_shared<catgs::Scene>(catgs::load_scene(o.scene, load, &report));
+    auto scene = std::make_shared<catgs::Scene>(catgs::cli::load_scene(o.scene, o.quiet));
     if (o.sh_degree >= 0) catgs::truncate_sh(*scene, o.sh_degree);
-    if (!o.quiet && (report.dropped_invalid || report.dropped_transparent))
-        std::cerr << "dropped " << report.dropped_invalid << " invalid and " << report.dropped_transparent
-                  << " transparent (opacity < 1/255) Gaussians of " << report.records << "\n";
 
     if (o.info) {
         if (o.json)
@@ -238,7 +228,7 @@ int main(int argc, char** argv) {
     catgs::request_gpu_hardware_queues();
     Options o;
     CLI::App app{"catgs-render: render a 3D Gaussian Splatting scene along a camera path"};
-    catgs::cli::add_scene_flags(app, o.scene, o.spz_axes);
+    catgs::cli::add_scene_flags(app, o.scene);
     app.add_option("--cameras", o.cameras, "graphdeco cameras.json (uses its own intrinsics)");
     app.add_option("--trajectory", o.trajectory,
                    "trajectory file, or builtin:survey|orbit|flythrough|hover?speed=&fps=&altitude=&pitch=&frames= "
@@ -267,7 +257,6 @@ int main(int argc, char** argv) {
                    "render with the SH coefficients above this degree (0..3) dropped; 0: view-independent colour "
                    "(default: the scene's degree)")
         ->check(CLI::Range(0, 3));
-    app.add_flag("--drop-invalid", o.drop_invalid, "drop non-finite or zero-quaternion records instead of failing");
     app.add_flag("--info", o.info, "print the scene's count, SH degree, bounds and memory, then exit");
     app.add_flag("--json", o.json, "machine-readable output (--info, or the render summary with per-frame stats)");
     app.add_flag("--quiet", o.quiet, "no progress output on stderr");

@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstdio>
 #include <fstream>
+#include <iostream>
 #include <limits>
 #include <optional>
 #include <sstream>
@@ -12,6 +13,7 @@
 
 #include "catgs/cache.hpp"
 #include "catgs/error.hpp"
+#include "catgs/progress.hpp"
 #include "catgs/regular_file.hpp"
 
 namespace catgs::cli {
@@ -186,22 +188,37 @@ std::string describe_pipeline(const RenderOptions& o) {
     return s;
 }
 
-void add_scene_flags(CLI::App& app, std::string& scene, SpzAxes& spz_axes) {
-    app.add_option("--scene", scene,
+void add_scene_flags(CLI::App& app, SceneFlags& flags) {
+    app.add_option("--scene", flags.scene,
                    "scene file (PLY, compressed PLY, .splat, .spz, .sog, meta.json, .glb: docs/scene-formats.md), or "
                    "builtin:city?gaussians=N&seed=S")
         ->capture_default_str();
     app.add_option_function<std::string>(
            "--spz-axes",
-           [&spz_axes](std::string axes) {
+           [&flags](std::string axes) {
                // IsMember checks without case but hands the word on as typed.
                std::transform(axes.begin(), axes.end(), axes.begin(), [](unsigned char c) { return std::tolower(c); });
-               spz_axes = axes == "rub" ? SpzAxes::rub : SpzAxes::rdf;
+               flags.spz_axes = axes == "rub" ? SpzAxes::rub : SpzAxes::rdf;
            },
            "the axes of a .spz file's data: rdf (as splat-transform writes it) or rub (as Niantic's spz library "
            "writes it; y and z are flipped on load)")
         ->check(CLI::IsMember({"rdf", "rub"}, CLI::ignore_case))
         ->default_str("rdf");
+    app.add_flag("--drop-invalid", flags.drop_invalid,
+                 "drop non-finite or zero-quaternion records instead of failing (stderr tells how many)");
+}
+
+Scene load_scene(const SceneFlags& flags, bool quiet) {
+    LoadOptions load;
+    load.spz_axes = flags.spz_axes;
+    load.drop_invalid = flags.drop_invalid;
+    load.progress = stderr_progress(!quiet);
+    LoadReport report;
+    Scene scene = catgs::load_scene(flags.scene, load, &report);
+    if (!quiet && (report.dropped_invalid || report.dropped_transparent))
+        std::cerr << "dropped " << report.dropped_invalid << " invalid and " << report.dropped_transparent
+                  << " transparent (opacity < 1/255) Gaussians of " << report.records << "\n";
+    return scene;
 }
 
 std::array<float, 3> parse_background(const std::string& text) {

@@ -7,6 +7,7 @@
 #include <CLI/CLI.hpp>
 
 #include <array>
+#include <utility>
 #include <string>
 #include <vector>
 
@@ -40,9 +41,21 @@ void apply_pipeline_flags(const PipelineFlags& f, RenderOptions& options);
 /// A short description of the pipeline options for logs and benchmark tables.
 std::string describe_pipeline(const RenderOptions& o);
 
-/// --scene (a file of any format, or a builtin spec) and --spz-axes (the axes a .spz file's
-/// data is in: the format has no field for it), as catgs-render and catgs-bench take them.
-void add_scene_flags(CLI::App& app, std::string& scene, SpzAxes& spz_axes);
+/// --scene (a file of any format, or a builtin spec), --spz-axes (the axes a .spz file's data is
+/// in: the format has no field for it) and --drop-invalid, as catgs-render and catgs-bench take them.
+struct SceneFlags {
+    explicit SceneFlags(std::string default_scene) : scene(std::move(default_scene)) {}
+    std::string scene;
+    SpzAxes spz_axes = SpzAxes::rdf;
+    bool drop_invalid = false;
+};
+
+void add_scene_flags(CLI::App& app, SceneFlags& flags);
+
+/// Loads --scene as the flags say, with progress on stderr unless `quiet`; what was dropped
+/// (invalid records under --drop-invalid, transparent ones always) is told on stderr unless
+/// `quiet`, so a benchmark never times a scene smaller than the file without saying so.
+Scene load_scene(const SceneFlags& flags, bool quiet);
 
 /// catgs-render's --background "r,g,b", each in [0, 1]; throws catgs::Error naming the flag.
 std::array<float, 3> parse_background(const std::string& text);
