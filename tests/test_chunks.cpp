@@ -87,6 +87,49 @@ TEST(ChunkPartition, ReordersWithoutLosingAGaussianAndBoundsEveryMember) {
     EXPECT_LT(chunk_volume, 3.0 * box);
 }
 
+/// The volume of a chunk's box of means.
+double chunk_box_volume(const Chunk& c) {
+    return static_cast<double>(c.hi[0] - c.lo[0]) * (c.hi[1] - c.lo[1]) * (c.hi[2] - c.lo[2]);
+}
+
+/// A few far strays stretch the scene's box: 10^5..10^7 m out, the bulk (a 8 x 8 x 9 m box)
+/// fits one cell of the 1024^3 grid over that box. Its chunks must still follow the bulk's own
+/// octree: their boxes cover the bulk's box a few times at most, as without strays (the first
+/// partition cut the cell in file order, every chunk nearly the whole bulk: ~20x).
+TEST(ChunkPartition, FarStraysLeaveTheBulkChunksCompact) {
+    const std::uint64_t seed = test::fresh_seed("chunk partition strays");
+    test::RandomSceneParams p;
+    p.count = 20000;
+    p.sh_degree = 0;
+    Scene s = test::random_scene(seed, p);
+    const float strays[][3] = {{1e6f, 0, 5}, {-2e5f, 3e7f, 5}, {0, 0, -1e5f}};
+    for (std::size_t k = 0; k < std::size(strays); ++k)
+        for (int a = 0; a < 3; ++a) s.positions[3 * (100 * k + 7) + a] = strays[k][a];
+    auto is_stray = [&](std::uint32_t i) {
+        return std::abs(s.positions[3 * i]) > 100 || std::abs(s.positions[3 * i + 1]) > 100 ||
+               std::abs(s.positions[3 * i + 2]) > 100;
+    };
+    partition_into_chunks(s);
+    ASSERT_NO_THROW(s.check_consistent("partitioned"));
+    const double bulk_box = 2 * p.extent * 2 * p.extent * (p.depth_max - p.depth_min);
+    double bulk_chunk_volume = 0;
+    int stray_chunks = 0, strays_found = 0;
+    for (const Chunk& c : s.chunks) {
+        int in_chunk = 0;
+        for (std::uint32_t i = c.begin; i < c.end; ++i) in_chunk += is_stray(i) ? 1 : 0;
+        strays_found += in_chunk;
+        if (in_chunk > 0)
+            ++stray_chunks;
+        else
+            bulk_chunk_volume += chunk_box_volume(c);
+    }
+    EXPECT_EQ(strays_found, 3);
+    EXPECT_LE(stray_chunks, 3);
+    std::cout << "[chunks] " << s.chunks.size() << " chunks; the bulk's boxes sum to " << bulk_chunk_volume / bulk_box
+              << " of its box (CATGS_TEST_SEED=" << seed << ")" << std::endl;
+    EXPECT_LT(bulk_chunk_volume, 3.0 * bulk_box) << "CATGS_TEST_SEED=" << seed;
+}
+
 TEST(ChunkPartition, NonFinitePositionsGoLastInAChunkThatIsNeverCulled) {
     Scene s = test::random_scene(7, {.count = 3000});
     s.positions[3 * 10] = std::numeric_limits<float>::quiet_NaN();

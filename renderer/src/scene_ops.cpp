@@ -102,70 +102,97 @@ void permute(V& values, const std::vector<std::size_t>& order, std::size_t strid
     values.swap(out);
 }
 
-}  // namespace
+// Cells of a 1024^3 grid over a box: 10 bits per axis, a 30-bit code.
+constexpr int kCellBits = 10;
+constexpr std::uint64_t kNonFiniteCode = std::uint64_t{1} << 30;  // past every real code: non-finite last
 
-void partition_into_chunks(Scene& scene) {
-    const std::size_t n = scene.count();
-    // Cells of a 1024^3 grid over the finite means: 10 bits per axis.
-    constexpr int kCellBits = 10;
-    constexpr double kCells = static_cast<double>(1u << kCellBits);
+// A deepest cell that still holds more than a chunk is cut again over its own box at most this
+// many times (each time 10 more bits an axis); beyond that the Gaussians lie within float's
+// spacing of each other and are cut in order.
+constexpr int kMaxRefinements = 6;
+
+struct MortonBox {
     float lo[3], hi[3];
+};
+
+bool finite_position(const Scene& scene, std::size_t i) {
+    return std::isfinite(scene.positions[3 * i]) && std::isfinite(scene.positions[3 * i + 1]) &&
+           std::isfinite(scene.positions[3 * i + 2]);
+}
+
+/// The box of the finite positions of the Gaussians keys[begin, end) index (low 32 bits).
+MortonBox box_of(const Scene& scene, const std::vector<std::uint64_t>& keys, std::size_t begin, std::size_t end) {
+    MortonBox b;
     for (int a = 0; a < 3; ++a) {
-        lo[a] = std::numeric_limits<float>::infinity();
-        hi[a] = -std::numeric_limits<float>::infinity();
+        b.lo[a] = std::numeric_limits<float>::infinity();
+        b.hi[a] = -std::numeric_limits<float>::infinity();
     }
-    auto finite_at = [&](std::size_t i) {
-        return std::isfinite(scene.positions[3 * i]) && std::isfinite(scene.positions[3 * i + 1]) &&
-               std::isfinite(scene.positions[3 * i + 2]);
-    };
-    for (std::size_t i = 0; i < n; ++i)
-        if (finite_at(i))
-            for (int a = 0; a < 3; ++a) {
-                lo[a] = std::min(lo[a], scene.positions[3 * i + a]);
-                hi[a] = std::max(hi[a], scene.positions[3 * i + a]);
-            }
-    // Key = Morton code << 32 | index: unique keys, so an unstable sort gives the stable order.
-    std::vector<std::uint64_t> keys(n);
-    for (std::size_t i = 0; i < n; ++i) {
-        std::uint64_t code = std::uint64_t{1} << 30;  // past every real code: non-finite last
-        if (finite_at(i)) {
-            std::uint32_t cell[3];
-            for (int a = 0; a < 3; ++a) {
-                const double extent = static_cast<double>(hi[a]) - lo[a];
-                const double t = extent > 0 ? (scene.positions[3 * i + a] - static_cast<double>(lo[a])) / extent : 0.0;
-                cell[a] = static_cast<std::uint32_t>(std::min(kCells - 1, std::max(0.0, t * kCells)));
-            }
-            code = spread_bits(cell[0]) | spread_bits(cell[1]) << 1 | spread_bits(cell[2]) << 2;
+    for (std::size_t j = begin; j < end; ++j) {
+        const std::size_t i = static_cast<std::size_t>(keys[j] & 0xffffffffu);
+        if (!finite_position(scene, i)) continue;
+        for (int a = 0; a < 3; ++a) {
+            b.lo[a] = std::min(b.lo[a], scene.positions[3 * i + a]);
+            b.hi[a] = std::max(b.hi[a], scene.positions[3 * i + a]);
         }
-        keys[i] = code << 32 | static_cast<std::uint64_t>(i);
     }
-    std::sort(keys.begin(), keys.end());
-    std::vector<std::size_t> order(n);
-    for (std::size_t j = 0; j < n; ++j) order[j] = static_cast<std::size_t>(keys[j] & 0xffffffffu);
-    permute(scene.positions, order, 3);
-    permute(scene.scales, order, 3);
-    permute(scene.rotations, order, 4);
-    permute(scene.opacities, order, 1);
-    permute(scene.sh, order, scene.sh_floats_per_gaussian());
-    // Chunks follow the octree of the Morton codes, so that none straddles a cell boundary
-    // high up the tree (a fixed cut every kChunkGaussians would give a chunk that spans half
-    // the scene wherever the curve jumps between octants): a cell with more Gaussians than a
-    // chunk holds is split into its 8 children; consecutive children are grouped while they
-    // fit one chunk (their union stays inside the parent cell).
-    scene.chunks.clear();
-    auto code_of = [&](std::size_t j) { return keys[j] >> 32; };
-    auto emit = [&](std::size_t begin, std::size_t end) {
+    return b;
+}
+
+/// Key = Morton code in `box` << 32 | index: unique keys, so an unstable sort gives the stable order.
+std::uint64_t morton_key(const Scene& scene, std::size_t i, const MortonBox& box) {
+    constexpr double kCells = static_cast<double>(1u << kCellBits);
+    std::uint64_t code = kNonFiniteCode;
+    if (finite_position(scene, i)) {
+        std::uint32_t cell[3];
+        for (int a = 0; a < 3; ++a) {
+            const double extent = static_cast<double>(box.hi[a]) - box.lo[a];
+            const double t = extent > 0 ? (scene.positions[3 * i + a] - static_cast<double>(box.lo[a])) / extent : 0.0;
+            cell[a] = static_cast<std::uint32_t>(std::min(kCells - 1, std::max(0.0, t * kCells)));
+        }
+        code = spread_bits(cell[0]) | spread_bits(cell[1]) << 1 | spread_bits(cell[2]) << 2;
+    }
+    return code << 32 | static_cast<std::uint64_t>(i);
+}
+
+/// Orders keys[begin, end) (finite positions only) along the octree of their own box and
+/// appends chunks that follow it: a cell with more Gaussians than a chunk holds is split into
+/// its 8 children, and consecutive children are grouped while they fit one chunk (their union
+/// stays inside the parent cell), so no chunk straddles a cell boundary high up the tree (a
+/// fixed cut every kChunkGaussians would give a chunk that spans half the scene wherever the
+/// curve jumps between octants).
+class OctreeChunker {
+public:
+    OctreeChunker(const Scene& scene, std::vector<std::uint64_t>& keys, std::vector<Chunk>& chunks)
+        : scene_(scene), keys_(keys), chunks_(chunks) {}
+
+    void order_and_cut(std::size_t begin, std::size_t end, int refinement) {
+        const MortonBox box = box_of(scene_, keys_, begin, end);
+        for (std::size_t j = begin; j < end; ++j)
+            keys_[j] = morton_key(scene_, static_cast<std::size_t>(keys_[j] & 0xffffffffu), box);
+        std::sort(keys_.begin() + static_cast<std::ptrdiff_t>(begin), keys_.begin() + static_cast<std::ptrdiff_t>(end));
+        split(begin, end, 0, refinement);
+    }
+
+    void emit(std::size_t begin, std::size_t end) {
         for (std::size_t b = begin; b < end; b += kChunkGaussians) {
             Chunk c;
             c.begin = static_cast<std::uint32_t>(b);
             c.end = static_cast<std::uint32_t>(std::min<std::size_t>(end, b + kChunkGaussians));
-            scene.chunks.push_back(c);
+            chunks_.push_back(c);
         }
-    };
-    auto split = [&](auto& self, std::size_t begin, std::size_t end, int level) -> void {
-        if (end - begin <= kChunkGaussians || level == kCellBits) {
-            emit(begin, end);  // the deepest cells (or the non-finite tail) are cut in order
-            return;
+    }
+
+private:
+    std::uint64_t code_of(std::size_t j) const { return keys_[j] >> 32; }
+
+    void split(std::size_t begin, std::size_t end, int level, int refinement) {
+        if (end - begin <= kChunkGaussians) return emit(begin, end);
+        if (level == kCellBits) {
+            // A deepest cell too full for one chunk: the bulk of a scene whose box a few far
+            // strays stretch (a stray 10^4 extents out leaves the whole bulk in one cell) is
+            // ordered again over its own box, so chunks stay compact however far strays lie.
+            if (refinement < kMaxRefinements) return order_and_cut(begin, end, refinement + 1);
+            return emit(begin, end);
         }
         const int shift = 3 * (kCellBits - 1 - level);
         std::size_t group_begin = begin, child_begin = begin;
@@ -175,7 +202,7 @@ void partition_into_chunks(Scene& scene) {
             while (child_end < end && code_of(child_end) >> shift == child) ++child_end;
             if (child_end - child_begin > kChunkGaussians) {
                 if (group_begin < child_begin) emit(group_begin, child_begin);
-                self(self, child_begin, child_end, level + 1);
+                split(child_begin, child_end, level + 1, refinement);
                 group_begin = child_end;
             } else if (child_end - group_begin > kChunkGaussians) {
                 emit(group_begin, child_begin);
@@ -184,12 +211,37 @@ void partition_into_chunks(Scene& scene) {
             child_begin = child_end;
         }
         if (group_begin < end) emit(group_begin, end);
-    };
-    // The non-finite tail (code 2^30) is its own run after the finite codes.
-    std::size_t finite_end = n;
-    while (finite_end > 0 && code_of(finite_end - 1) >> 30) --finite_end;
-    split(split, 0, finite_end, 0);
-    emit(finite_end, n);
+    }
+
+    const Scene& scene_;
+    std::vector<std::uint64_t>& keys_;
+    std::vector<Chunk>& chunks_;
+};
+
+}  // namespace
+
+void partition_into_chunks(Scene& scene) {
+    const std::size_t n = scene.count();
+    // The finite positions first; the non-finite ones go last, in file order, in chunks of
+    // their own (never culled).
+    std::vector<std::uint64_t> keys;
+    keys.reserve(n);
+    for (std::size_t i = 0; i < n; ++i)
+        if (finite_position(scene, i)) keys.push_back(i);
+    const std::size_t finite_end = keys.size();
+    for (std::size_t i = 0; i < n; ++i)
+        if (!finite_position(scene, i)) keys.push_back(kNonFiniteCode << 32 | i);
+    scene.chunks.clear();
+    OctreeChunker chunker(scene, keys, scene.chunks);
+    chunker.order_and_cut(0, finite_end, 0);
+    chunker.emit(finite_end, n);
+    std::vector<std::size_t> order(n);
+    for (std::size_t j = 0; j < n; ++j) order[j] = static_cast<std::size_t>(keys[j] & 0xffffffffu);
+    permute(scene.positions, order, 3);
+    permute(scene.scales, order, 3);
+    permute(scene.rotations, order, 4);
+    permute(scene.opacities, order, 1);
+    permute(scene.sh, order, scene.sh_floats_per_gaussian());
     scene.update_chunk_bounds();
 }
 
