@@ -102,6 +102,9 @@ TEST_F(CudaChunkTest, SpeculativeCacheDrawsTheSameFrames) {
 // windows of 2 and 16 poses (the others read from mapped host memory), while the images equal
 // the ones drawn without chunk culling (a chunk lost or out of order in the compaction would
 // move a Gaussian or its depth ties).
+/// Chunks whose test may round the other way on the device (see the use).
+constexpr double kBorderlineChunks = 2;
+
 template <typename T>
 void expect_chunk_counts_of_the_cpu(const Scene& scene, std::uint64_t seed) {
     cuda::CudaRenderer<T> gpu, whole;
@@ -133,7 +136,13 @@ void expect_chunk_counts_of_the_cpu(const Scene& scene, std::uint64_t seed) {
                 if (!g.key_frame) continue;
                 ++keys;
                 EXPECT_EQ(g.chunks, scene.chunks.size());
-                ASSERT_EQ(g.chunks_culled, c.chunks_culled)
+                // nvcc contracts the plane tests' products into FMAs, the host compiler does
+                // not: a chunk whose farthest corner lies within rounding of a plane can go
+                // either way (seen: 18577 culled against 18576 of 40000, images equal). Such a
+                // chunk is kChunkMarginPx beyond any footprint, so either answer is sound; a
+                // compaction that lost or repeated a block step would miss by thousands, and a
+                // lost chunk that matters would change the image (asserted above).
+                EXPECT_NEAR(g.chunks_culled, c.chunks_culled, kBorderlineChunks)
                     << "window " << window << " path " << path << " (CATGS_TEST_SEED=" << seed << ")";
             }
         }
