@@ -12,6 +12,7 @@
 #include "catgs/builtin_city.hpp"
 #include "catgs/cache.hpp"
 #include "catgs/cpu_renderer.hpp"
+#include "catgs/stages/keys.hpp"
 #include "catgs/trajectory.hpp"
 #include "catgs_paths.hpp"
 #include "test_util.hpp"
@@ -196,19 +197,13 @@ std::uint32_t order_violation_ulps(const CpuRenderer<float>& cached, const CpuRe
 /// displacement since the key frame), so the key frame's ulp is at most the ulp at the deeper
 /// Gaussian's current depth plus `shift`.
 double order_violation_key_ulps(const CpuRenderer<float>& cached, const CpuRenderer<float>& full, double shift) {
-    auto as_float = [](std::uint64_t key) {
-        const std::uint32_t bits = static_cast<std::uint32_t>(key);
-        float d;
-        std::memcpy(&d, &bits, sizeof(d));
-        return d;
-    };
     double worst = 0;
     const auto& cr = cached.tile_ranges();
     const auto& fr = full.tile_ranges();
     for (std::size_t t = 0; t < fr.size(); ++t) {
         std::map<std::uint32_t, float> depth;  // Gaussian -> its depth key in the full pipeline
         for (std::uint64_t j = fr[t].begin; j < fr[t].end; ++j)
-            depth[full.sorted_values()[j]] = as_float(full.sorted_keys()[j]);
+            depth[full.sorted_values()[j]] = depth_of_key(full.sorted_keys()[j]);
         float deepest = -1;
         for (std::uint64_t j = cr[t].begin; j < cr[t].end; ++j) {
             const auto it = depth.find(cached.sorted_values()[j]);

@@ -215,9 +215,11 @@ TEST(StageKeys, KeysSortByTileThenDepth) {
         tiles.push_back(tile);
         keys.push_back(make_sort_key(tile, d));
         ASSERT_EQ(key_tile(keys.back()), tile);
-        std::uint32_t bits;
+        std::uint32_t bits, back;
+        const float decoded = depth_of_key(keys.back());
         std::memcpy(&bits, &d, sizeof bits);
-        ASSERT_EQ(static_cast<std::uint32_t>(keys.back()), bits);
+        std::memcpy(&back, &decoded, sizeof back);
+        ASSERT_EQ(back, bits);
     }
     std::vector<std::size_t> by_key(depths.size()), by_pair(depths.size());
     std::iota(by_key.begin(), by_key.end(), 0);

@@ -106,7 +106,8 @@ __global__ void __launch_bounds__(Threads, MinBlocks)
             extent = fmaxf(extent, static_cast<float>(reach_bound));
         }
         if (tiles > 0) {
-            sort_depth[slot] = poses[first_valid_pose(valid)].key_depth;
+            // At the key pose for every listed Gaussian (cpu_renderer.cpp says why).
+            sort_depth[slot] = (valid & 1u) ? poses[0].key_depth : key_depth_at(views[0], scene.positions + 3 * i);
             // At the actual pose: pose 0's geometry unless the window lowered the near plane;
             // the SH colour only now that the Gaussian is known to touch a tile.
             const GaussianRef g = gaussian_ref(scene, i);

@@ -30,8 +30,8 @@ __global__ void depth_keys_kernel(std::uint64_t n, const unsigned long long* sel
     const std::uint64_t k = static_cast<std::uint64_t>(blockIdx.x) * blockDim.x + threadIdx.x;
     if (k >= n || (selected && k >= *selected)) return;
     const std::uint32_t slot = with_pairs[k];
-    // The bits make_sort_key puts in the low half of a pair's key (depth > 0 orders like them).
-    keys[k] = __float_as_uint(depth[slot]);
+    // The bits make_sort_key puts in the low half of a pair's key.
+    keys[k] = ordered_depth_bits(depth[slot]);
     slots[k] = slot;
 }
 

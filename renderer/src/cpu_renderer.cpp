@@ -291,10 +291,14 @@ void CpuRenderer<T>::preprocess(const Scene& scene, const View<T>& actual, const
                         }
                         continue;
                     }
-                    // Keys sort by the depth at the first pose where the Gaussian is visible (the key
-                    // pose, so the key frame itself is exact); the envelope needs the nearest depth
-                    // at any pose.
-                    sort_depth_[i] = poses[first_valid_pose(valid)].key_depth;
+                    // Keys sort by the depth at the key pose, for every listed Gaussian, also one
+                    // behind the camera there that a later pose brings into view: a cached frame
+                    // reuses this order while the camera has only translated, which shifts every
+                    // depth taken at one pose alike (depths taken at different poses, such as
+                    // each Gaussian's first visible one, do not keep their order). The envelope
+                    // needs the nearest depth at any pose.
+                    sort_depth_[i] =
+                        (valid & 1u) ? poses[0].key_depth : key_depth_at(window.views[0], &scene.positions[3 * i]);
                     for (int k = 0; k < w; ++k)
                         if (valid >> k & 1u) local_min = std::min(local_min, static_cast<double>(poses[k].depth));
                     // At the actual pose: pose 0's geometry unless the window lowered the near plane;

@@ -1,5 +1,5 @@
-// The sort key of a tile-Gaussian pair: tile id in the high 32 bits, the float bits of the view
-// depth in the low 32, so that one radix sort orders the pairs by tile and then front to back.
+// The sort key of a tile-Gaussian pair: tile id in the high 32 bits, the view depth's float bits
+// in sort order in the low 32, so that one radix sort orders the pairs by tile and then front to back.
 // Both backends emit, park and sort keys through these helpers.
 #pragma once
 
@@ -10,11 +10,15 @@
 
 namespace catgs {
 
-/// The depth half of a key: the float's bits.
+/// The depth half of a key: the float's bits, in sort order (ordered_depth_bits).
 inline constexpr int kSortKeyDepthBits = 32;
 
-/// Depth > near plane > 0, and positive IEEE floats order like their bit patterns.
-CATGS_INLINE std::uint64_t make_sort_key(std::uint32_t tile, float depth) {
+/// A depth's bits in an order that sorts as the depth does: the sign bit set on positive floats,
+/// every bit flipped on negative ones, so negative depths sort first and nearest-first among
+/// themselves. A frame's own depths are > near plane > 0, but a cached window keys its
+/// Gaussians by their depth at the key pose, where one that enters the view later may lie
+/// behind the camera (cpu_renderer.cpp, preprocess.cu).
+CATGS_INLINE std::uint32_t ordered_depth_bits(float depth) {
 #if defined(__CUDA_ARCH__)
     const std::uint32_t bits = __float_as_uint(depth);
 #else
@@ -22,7 +26,24 @@ CATGS_INLINE std::uint64_t make_sort_key(std::uint32_t tile, float depth) {
     static_assert(sizeof(bits) == sizeof(depth));
     std::memcpy(&bits, &depth, sizeof(bits));
 #endif
-    return (static_cast<std::uint64_t>(tile) << kSortKeyDepthBits) | bits;
+    return (bits & 0x80000000u) ? ~bits : (bits | 0x80000000u);
+}
+
+/// The depth a key holds: ordered_depth_bits undone.
+CATGS_INLINE float depth_of_key(std::uint64_t key) {
+    const std::uint32_t ordered = static_cast<std::uint32_t>(key);
+    const std::uint32_t bits = (ordered & 0x80000000u) ? (ordered & 0x7fffffffu) : ~ordered;
+#if defined(__CUDA_ARCH__)
+    return __uint_as_float(bits);
+#else
+    float depth;
+    std::memcpy(&depth, &bits, sizeof(depth));
+    return depth;
+#endif
+}
+
+CATGS_INLINE std::uint64_t make_sort_key(std::uint32_t tile, float depth) {
+    return (static_cast<std::uint64_t>(tile) << kSortKeyDepthBits) | ordered_depth_bits(depth);
 }
 
 CATGS_INLINE std::uint32_t key_tile(std::uint64_t key) {
@@ -54,13 +75,6 @@ inline constexpr int kNarrowTileKeyBits = 16;
 
 CATGS_HD constexpr bool narrow_tile_keys(std::uint64_t tiles) {
     return sort_key_tile_bits(tiles) <= kNarrowTileKeyBits;
-}
-
-/// The first pose set in `valid` (not 0): the pose whose depth orders a Gaussian's keys.
-CATGS_INLINE int first_valid_pose(std::uint32_t valid) {
-    int k = 0;
-    while (!(valid >> k & 1u)) ++k;
-    return k;
 }
 
 }  // namespace catgs

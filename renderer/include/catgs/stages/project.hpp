@@ -49,6 +49,18 @@ CATGS_HD Mat3<T> covariance_3d(const float* scale, const float* rotation) {
     return m * transpose(m);
 }
 
+/// Projected::key_depth at `view` for a mean at `position`: view-space z summed in double in
+/// the order of pc.z (Mat3 * Vec3 + translation), so the double renderer's keys are unchanged;
+/// 3 double multiply-adds per Gaussian and pose. Defined behind the camera too: a cached
+/// window keys every Gaussian it lists by its depth at the key pose, where one that enters
+/// the view at a later pose may not be in front yet.
+template <typename T>
+CATGS_HD float key_depth_at(const View<T>& view, const float* position) {
+    return static_cast<float>(view.depth_row[0] * static_cast<double>(position[0]) +
+                              view.depth_row[1] * static_cast<double>(position[1]) +
+                              view.depth_row[2] * static_cast<double>(position[2]) + view.depth_offset);
+}
+
 /// Projects one Gaussian's geometry: mean, 2D covariance, conic, depth, opacity (not its
 /// colour). Returns false (culled) when it is at or behind the near plane, or when its 2D
 /// covariance is degenerate or not finite; `out` is then unspecified. Tile counting needs
@@ -58,12 +70,8 @@ CATGS_HD bool project_geometry(const GaussianRef& g, const View<T>& view, Projec
     const Vec3<T> p{static_cast<T>(g.position[0]), static_cast<T>(g.position[1]), static_cast<T>(g.position[2])};
     const Vec3<T> pc = view.rotation * p + view.translation;
     if (!(pc.z > view.near_plane)) return false;  // also rejects NaN
-    // The same sum in the same order as pc.z in double (Mat3 * Vec3 + translation), so the
-    // double renderer's keys are unchanged: 3 double multiply-adds per Gaussian and pose,
-    // done first so that no double stays live through the covariance below.
-    out.key_depth = static_cast<float>(view.depth_row[0] * static_cast<double>(g.position[0]) +
-                                       view.depth_row[1] * static_cast<double>(g.position[1]) +
-                                       view.depth_row[2] * static_cast<double>(g.position[2]) + view.depth_offset);
+    // Done first, so that no double stays live through the covariance below.
+    out.key_depth = key_depth_at(view, g.position);
 
     // Jacobian of the projection at the clamped direction: far off-screen Gaussians would
     // otherwise get 2D covariances dominated by the 1/z^2 terms.
