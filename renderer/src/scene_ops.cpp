@@ -4,6 +4,7 @@
 #include <cmath>
 #include <cstdint>
 #include <limits>
+#include <numeric>
 #include <string>
 #include <vector>
 
@@ -104,7 +105,6 @@ void permute(V& values, const std::vector<std::size_t>& order, std::size_t strid
 
 // Cells of a 1024^3 grid over a box: 10 bits per axis, a 30-bit code.
 constexpr int kCellBits = 10;
-constexpr std::uint64_t kNonFiniteCode = std::uint64_t{1} << 30;  // past every real code: non-finite last
 
 // A deepest cell that still holds more than a chunk is cut again over its own box at most this
 // many times (each time 10 more bits an axis); beyond that the Gaussians lie within float's
@@ -120,7 +120,12 @@ bool finite_position(const Scene& scene, std::size_t i) {
            std::isfinite(scene.positions[3 * i + 2]);
 }
 
-/// The box of the finite positions of the Gaussians keys[begin, end) index (low 32 bits).
+/// The Gaussian a key indexes (its low 32 bits).
+std::size_t index_of(std::uint64_t key) {
+    return static_cast<std::size_t>(key & 0xffffffffu);
+}
+
+/// The box of the positions (finite) of the Gaussians keys[begin, end) index.
 MortonBox box_of(const Scene& scene, const std::vector<std::uint64_t>& keys, std::size_t begin, std::size_t end) {
     MortonBox b;
     for (int a = 0; a < 3; ++a) {
@@ -128,8 +133,7 @@ MortonBox box_of(const Scene& scene, const std::vector<std::uint64_t>& keys, std
         b.hi[a] = -std::numeric_limits<float>::infinity();
     }
     for (std::size_t j = begin; j < end; ++j) {
-        const std::size_t i = static_cast<std::size_t>(keys[j] & 0xffffffffu);
-        if (!finite_position(scene, i)) continue;
+        const std::size_t i = index_of(keys[j]);
         for (int a = 0; a < 3; ++a) {
             b.lo[a] = std::min(b.lo[a], scene.positions[3 * i + a]);
             b.hi[a] = std::max(b.hi[a], scene.positions[3 * i + a]);
@@ -138,19 +142,17 @@ MortonBox box_of(const Scene& scene, const std::vector<std::uint64_t>& keys, std
     return b;
 }
 
-/// Key = Morton code in `box` << 32 | index: unique keys, so an unstable sort gives the stable order.
+/// Key = Morton code in `box` << 32 | index, for a finite position: unique keys, so an unstable
+/// sort gives the stable order.
 std::uint64_t morton_key(const Scene& scene, std::size_t i, const MortonBox& box) {
     constexpr double kCells = static_cast<double>(1u << kCellBits);
-    std::uint64_t code = kNonFiniteCode;
-    if (finite_position(scene, i)) {
-        std::uint32_t cell[3];
-        for (int a = 0; a < 3; ++a) {
-            const double extent = static_cast<double>(box.hi[a]) - box.lo[a];
-            const double t = extent > 0 ? (scene.positions[3 * i + a] - static_cast<double>(box.lo[a])) / extent : 0.0;
-            cell[a] = static_cast<std::uint32_t>(std::min(kCells - 1, std::max(0.0, t * kCells)));
-        }
-        code = spread_bits(cell[0]) | spread_bits(cell[1]) << 1 | spread_bits(cell[2]) << 2;
+    std::uint32_t cell[3];
+    for (int a = 0; a < 3; ++a) {
+        const double extent = static_cast<double>(box.hi[a]) - box.lo[a];
+        const double t = extent > 0 ? (scene.positions[3 * i + a] - static_cast<double>(box.lo[a])) / extent : 0.0;
+        cell[a] = static_cast<std::uint32_t>(std::min(kCells - 1, std::max(0.0, t * kCells)));
     }
+    const std::uint64_t code = spread_bits(cell[0]) | spread_bits(cell[1]) << 1 | spread_bits(cell[2]) << 2;
     return code << 32 | static_cast<std::uint64_t>(i);
 }
 
@@ -167,8 +169,7 @@ public:
 
     void order_and_cut(std::size_t begin, std::size_t end, int refinement) {
         const MortonBox box = box_of(scene_, keys_, begin, end);
-        for (std::size_t j = begin; j < end; ++j)
-            keys_[j] = morton_key(scene_, static_cast<std::size_t>(keys_[j] & 0xffffffffu), box);
+        for (std::size_t j = begin; j < end; ++j) keys_[j] = morton_key(scene_, index_of(keys_[j]), box);
         std::sort(keys_.begin() + static_cast<std::ptrdiff_t>(begin), keys_.begin() + static_cast<std::ptrdiff_t>(end));
         split(begin, end, 0, refinement);
     }
@@ -224,19 +225,17 @@ void partition_into_chunks(Scene& scene) {
     const std::size_t n = scene.count();
     // The finite positions first; the non-finite ones go last, in file order, in chunks of
     // their own (never culled).
-    std::vector<std::uint64_t> keys;
-    keys.reserve(n);
-    for (std::size_t i = 0; i < n; ++i)
-        if (finite_position(scene, i)) keys.push_back(i);
-    const std::size_t finite_end = keys.size();
-    for (std::size_t i = 0; i < n; ++i)
-        if (!finite_position(scene, i)) keys.push_back(kNonFiniteCode << 32 | i);
+    std::vector<std::uint64_t> keys(n);
+    std::iota(keys.begin(), keys.end(), std::uint64_t{0});
+    const std::size_t finite_end = static_cast<std::size_t>(
+        std::stable_partition(keys.begin(), keys.end(), [&](std::uint64_t i) { return finite_position(scene, i); }) -
+        keys.begin());
     scene.chunks.clear();
     OctreeChunker chunker(scene, keys, scene.chunks);
     chunker.order_and_cut(0, finite_end, 0);
     chunker.emit(finite_end, n);
     std::vector<std::size_t> order(n);
-    for (std::size_t j = 0; j < n; ++j) order[j] = static_cast<std::size_t>(keys[j] & 0xffffffffu);
+    for (std::size_t j = 0; j < n; ++j) order[j] = index_of(keys[j]);
     permute(scene.positions, order, 3);
     permute(scene.scales, order, 3);
     permute(scene.rotations, order, 4);
